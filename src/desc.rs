@@ -1,0 +1,93 @@
+//! A loaded scene before it is spawned into an ECS world.
+//!
+//! Loaders ([`crate::loader`]) produce a [`SceneDesc`]; the systems module
+//! spawns it as entities. Keeping this plain struct between the two lets
+//! loaders stay free of any ECS code and lets tests inspect what was loaded.
+
+use std::sync::Arc;
+
+use crate::camera::Camera;
+use crate::light::Light;
+use crate::material::Material;
+use crate::math::Color;
+use crate::mesh::Mesh;
+use crate::shapes::Shape;
+use crate::transform::Transform;
+
+/// What an object's surface is made of.
+#[derive(Clone, Debug)]
+pub enum Geometry {
+    /// An analytic shape.
+    Shape(Shape),
+    /// A triangle mesh, shared between instances.
+    Mesh(Arc<Mesh>),
+}
+
+/// One renderable object.
+#[derive(Clone, Debug)]
+pub struct ObjectDesc {
+    /// Optional name, for messages.
+    pub name: Option<String>,
+    /// Object-to-world transform.
+    pub transform: Transform,
+    /// Shape or mesh.
+    pub geometry: Geometry,
+    /// Surface material.
+    pub material: Material,
+}
+
+/// One light with its placement.
+#[derive(Clone, Debug)]
+pub struct LightDesc {
+    /// Optional name.
+    pub name: Option<String>,
+    /// Placement: origin is the position, local `-Z` the direction.
+    pub transform: Transform,
+    /// The light.
+    pub light: Light,
+}
+
+/// Render settings a scene file may suggest; the command line overrides them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SettingsDesc {
+    /// Image width in pixels.
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    pub height: Option<u32>,
+    /// Samples per pixel.
+    pub spp: Option<u32>,
+    /// Maximum recursion depth.
+    pub max_depth: Option<u32>,
+    /// Contribution threshold for terminating rays.
+    pub min_contribution: Option<f32>,
+    /// Random seed.
+    pub seed: Option<u64>,
+    /// Exposure in stops for PNG output.
+    pub exposure: Option<f32>,
+}
+
+/// A whole scene as loaded from files.
+#[derive(Clone, Debug, Default)]
+pub struct SceneDesc {
+    /// Renderable objects.
+    pub objects: Vec<ObjectDesc>,
+    /// Lights.
+    pub lights: Vec<LightDesc>,
+    /// Cameras, in file order (the project's own camera first, then those
+    /// of included glTF files).
+    pub cameras: Vec<Camera>,
+    /// Radiance of rays that escape the scene.
+    pub background: Color,
+    /// Suggested settings.
+    pub settings: SettingsDesc,
+}
+
+impl SceneDesc {
+    /// Appends another scene's objects, lights and cameras (used when a
+    /// scene file includes a glTF file).
+    pub fn append(&mut self, other: SceneDesc) {
+        self.objects.extend(other.objects);
+        self.lights.extend(other.lights);
+        self.cameras.extend(other.cameras);
+    }
+}

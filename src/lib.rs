@@ -1,0 +1,44 @@
+//! # Prism
+//!
+//! A data-oriented ray tracer whose scene is a [`bevy_ecs`] world.
+//!
+//! The crate is split in two halves:
+//!
+//! * **Kernels** (this `src/` tree): geometry, intersection, BVH queries,
+//!   shading, cameras, image output and scene loaders. They are plain
+//!   functions over plain data and never touch an ECS schedule. Some data
+//!   types derive [`bevy_ecs::component::Component`] so that they can be
+//!   spawned directly, but no kernel queries a world.
+//! * **Systems** (the top-level `systems/` tree, compiled as the
+//!   [`systems`] module): ECS components, resources and the systems that
+//!   turn a world into a [`scene::RenderScene`] and render it by calling
+//!   the kernels.
+//!
+//! The quickest way in is [`systems::render_scene_desc`], or the `prism`
+//! command-line program.
+
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod desc;
+pub mod error;
+pub mod film;
+pub mod integrator;
+pub mod light;
+pub mod loader;
+pub mod material;
+pub mod math;
+pub mod mesh;
+pub mod optics;
+pub mod output;
+pub mod rng;
+pub mod scene;
+pub mod shading;
+pub mod shapes;
+pub mod stats;
+pub mod transform;
+
+#[path = "../systems/mod.rs"]
+pub mod systems;
+
+pub use error::{Error, Result};

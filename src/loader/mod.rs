@@ -1,0 +1,3 @@
+//! Scene loaders: glTF 2.0 and the project's own TOML scene format.
+
+pub mod gltf;

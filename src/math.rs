@@ -1,0 +1,58 @@
+//! Rays, colours and small vector helpers shared by every kernel.
+
+use glam::{Vec3, Vec3A};
+
+/// Linear RGB radiance or reflectance.
+pub type Color = Vec3;
+
+/// A ray `origin + t * direction` valid for `t` in `[tmin, tmax)`.
+///
+/// The direction is not required to be normalised: rays transformed into
+/// object space keep the world-space parameter `t`, so their direction is
+/// scaled by the inverse transform.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Start point.
+    pub origin: Vec3A,
+    /// Direction (any non-zero length).
+    pub direction: Vec3A,
+}
+
+impl Ray {
+    /// A ray from `origin` along `direction`.
+    #[inline]
+    pub fn new(origin: Vec3A, direction: Vec3A) -> Self {
+        Self { origin, direction }
+    }
+
+    /// The point at parameter `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3A {
+        self.origin + self.direction * t
+    }
+}
+
+/// Builds an orthonormal basis `(t, b)` around the unit vector `n`
+/// (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
+#[inline]
+pub fn orthonormal_basis(n: Vec3A) -> (Vec3A, Vec3A) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3A::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3A::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// Luminance of a linear Rec.709 colour.
+#[inline]
+pub fn luminance(c: Color) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// Largest component, used for contribution thresholds.
+#[inline]
+pub fn max_component(c: Color) -> f32 {
+    c.x.max(c.y).max(c.z)
+}
