@@ -419,3 +419,7 @@ fn vertex_normals(positions: &[Vec3A], indices: &[[u32; 3]]) -> Vec<Vec3A> {
     }
     normals.iter().map(|n| n.normalize_or_zero()).collect()
 }
+
+/// ECS component: the entity is an instance of this shared mesh.
+#[derive(bevy_ecs::component::Component, Clone, Debug)]
+pub struct MeshInstance(pub std::sync::Arc<Mesh>);

@@ -1,1 +1,298 @@
-//! TODO
+//! The render-ready scene: instances in world space, a top-level BVH over
+//! them, materials and lights. Built from ECS data by the systems module,
+//! or directly from a [`crate::desc::SceneDesc`] in tests.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::{Vec2, Vec3A};
+use obvhs::{aabb::Aabb, cwbvh::CwBvh};
+
+use crate::light::WorldLight;
+use crate::material::Material;
+use crate::math::{Color, Ray};
+use crate::mesh::{BuildQuality, Mesh, build_bvh, padded_aabb};
+use crate::shapes::Shape;
+use crate::transform::{InstanceTransform, Transform};
+
+/// The geometry of one instance.
+#[derive(Clone, Debug)]
+pub enum InstanceGeometry {
+    /// An analytic shape, intersected in object space.
+    Shape(Shape),
+    /// A shared triangle mesh with its own BVH.
+    Mesh(Arc<Mesh>),
+}
+
+/// One object placed in the world.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// Shape or mesh.
+    pub geometry: InstanceGeometry,
+    /// World/object matrices.
+    pub transform: InstanceTransform,
+    /// Index into [`RenderScene::materials`].
+    pub material: u32,
+}
+
+impl Instance {
+    /// Creates an instance; the transform must be valid.
+    pub fn new(geometry: InstanceGeometry, transform: &Transform, material: u32) -> Self {
+        Self {
+            geometry,
+            transform: InstanceTransform::new(transform),
+            material,
+        }
+    }
+
+    /// World-space bounds, `None` if unbounded (planes) or empty.
+    pub fn world_bounds(&self) -> Option<Aabb> {
+        let (lo, hi) = match &self.geometry {
+            InstanceGeometry::Shape(s) => s.bounds()?,
+            InstanceGeometry::Mesh(m) => m.bounds()?,
+        };
+        let m = &self.transform.to_world;
+        let mut wlo = Vec3A::splat(f32::INFINITY);
+        let mut whi = Vec3A::splat(f32::NEG_INFINITY);
+        for i in 0..8 {
+            let c = Vec3A::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            let w = m.transform_point3a(c);
+            wlo = wlo.min(w);
+            whi = whi.max(w);
+        }
+        (wlo.is_finite() && whi.is_finite()).then(|| padded_aabb(wlo, whi))
+    }
+}
+
+/// A surface point found by a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// World-space position.
+    pub point: Vec3A,
+    /// Unit geometric normal in world space, as the geometry defines it
+    /// (outward for closed shapes; not flipped towards the ray).
+    pub geometric_normal: Vec3A,
+    /// Unit shading normal in world space, on the same side as the
+    /// geometric normal.
+    pub shading_normal: Vec3A,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Instance index.
+    pub instance: u32,
+    /// Material index.
+    pub material: u32,
+}
+
+/// What an object-space intersection found, before world-space
+/// attributes are computed (done once, for the closest hit only).
+#[derive(Clone, Copy, Debug)]
+enum LocalHit {
+    Shape { normal: Vec3A, uv: Vec2 },
+    Mesh(crate::mesh::MeshHit),
+}
+
+/// A scene ready for rendering: instances, top-level BVH, materials, lights.
+#[derive(Debug)]
+pub struct RenderScene {
+    /// All instances; the top-level BVH indexes this array.
+    pub instances: Vec<Instance>,
+    /// Materials referenced by instances.
+    pub materials: Vec<Material>,
+    /// Lights in world space.
+    pub lights: Vec<WorldLight>,
+    /// Radiance of escaped rays.
+    pub background: Color,
+    /// Top-level BVH over bounded instances.
+    tlas: CwBvh,
+    /// Instance index per TLAS leaf slot.
+    tlas_instances: Vec<u32>,
+    /// Instances without bounds (infinite planes), tested one by one.
+    unbounded: Vec<u32>,
+    /// Seconds spent building the top-level BVH.
+    pub tlas_build_seconds: f64,
+}
+
+/// Converts an instance ray to object space.
+#[inline]
+fn to_object(inst: &Instance, ray: &Ray) -> Ray {
+    let m = &inst.transform.to_object;
+    Ray::new(
+        m.transform_point3a(ray.origin),
+        m.transform_vector3a(ray.direction),
+    )
+}
+
+impl RenderScene {
+    /// Builds the top-level BVH over `instances`.
+    pub fn new(
+        instances: Vec<Instance>,
+        materials: Vec<Material>,
+        lights: Vec<WorldLight>,
+        background: Color,
+        quality: BuildQuality,
+    ) -> Self {
+        let start = Instant::now();
+        let mut boxes = Vec::with_capacity(instances.len());
+        let mut bounded = Vec::with_capacity(instances.len());
+        let mut unbounded = Vec::new();
+        for (i, inst) in instances.iter().enumerate() {
+            match inst.world_bounds() {
+                Some(b) => {
+                    boxes.push(b);
+                    bounded.push(i as u32);
+                }
+                None => {
+                    // A mesh without triangles can never be hit; planes can.
+                    if matches!(inst.geometry, InstanceGeometry::Shape(_)) {
+                        unbounded.push(i as u32);
+                    }
+                }
+            }
+        }
+        let tlas = build_bvh(&boxes, quality);
+        let tlas_instances = tlas
+            .primitive_indices
+            .iter()
+            .map(|&slot| bounded[slot as usize])
+            .collect();
+        Self {
+            instances,
+            materials,
+            lights,
+            background,
+            tlas,
+            tlas_instances,
+            unbounded,
+            tlas_build_seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// Total triangles over all instances (instanced meshes count once per
+    /// instance).
+    pub fn triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| match &i.geometry {
+                InstanceGeometry::Mesh(m) => m.triangle_count(),
+                InstanceGeometry::Shape(_) => 0,
+            })
+            .sum()
+    }
+
+    #[inline]
+    fn intersect_instance(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, LocalHit)> {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) => s
+                .intersect(&local, t_min, t_max)
+                .map(|h| (h.t, LocalHit::Shape { normal: h.normal, uv: h.uv })),
+            InstanceGeometry::Mesh(m) => m
+                .intersect(&local, t_min, t_max)
+                .map(|h| (h.t, LocalHit::Mesh(h))),
+        }
+    }
+
+    #[inline]
+    fn occludes_instance(&self, index: u32, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).is_some(),
+            InstanceGeometry::Mesh(m) => m.occluded(&local, t_min, t_max),
+        }
+    }
+
+    /// The closest hit with `t` in `(t_min, t_max)`.
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut best: Option<(f32, u32, LocalHit)> = None;
+        let mut t_max = t_max;
+        for &i in &self.unbounded {
+            if let Some((t, h)) = self.intersect_instance(i, ray, t_min, t_max) {
+                t_max = t;
+                best = Some((t, i, h));
+            }
+        }
+        if !self.tlas_instances.is_empty() {
+            let oray = obvhs::ray::Ray::new(ray.origin, ray.direction, t_min, t_max);
+            let mut rh = obvhs::ray::RayHit::none();
+            self.tlas.ray_traverse(oray, &mut rh, |r, slot| {
+                let inst = self.tlas_instances[slot];
+                match self.intersect_instance(inst, ray, r.tmin, r.tmax) {
+                    Some((t, h)) => {
+                        best = Some((t, inst, h));
+                        t
+                    }
+                    None => f32::INFINITY,
+                }
+            });
+        }
+        let (t, index, local) = best?;
+        Some(self.finish_hit(ray, t, index, local))
+    }
+
+    /// True when anything blocks the ray between `t_min` and `t_max`; stops
+    /// at the first blocker found.
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        if self
+            .unbounded
+            .iter()
+            .any(|&i| self.occludes_instance(i, ray, t_min, t_max))
+        {
+            return true;
+        }
+        if self.tlas_instances.is_empty() {
+            return false;
+        }
+        let oray = obvhs::ray::Ray::new(ray.origin, ray.direction, t_min, t_max);
+        !self.tlas.ray_traverse_miss(oray, |r, slot| {
+            if self.occludes_instance(self.tlas_instances[slot], ray, r.tmin, r.tmax) {
+                r.tmin
+            } else {
+                f32::INFINITY
+            }
+        })
+    }
+
+    fn finish_hit(&self, ray: &Ray, t: f32, index: u32, local: LocalHit) -> Hit {
+        let inst = &self.instances[index as usize];
+        let xf = &inst.transform;
+        let (gn, sn, uv) = match (local, &inst.geometry) {
+            (LocalHit::Shape { normal, uv }, _) => {
+                let n = xf.normal(normal);
+                (n, n, uv)
+            }
+            (LocalHit::Mesh(h), InstanceGeometry::Mesh(m)) => {
+                let s = m.surface(&h);
+                let gn = xf.normal(s.geometric_normal);
+                let mut sn = xf.normal(s.shading_normal);
+                if sn.dot(gn) < 0.0 {
+                    sn = -sn;
+                }
+                (gn, sn, s.uv)
+            }
+            (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => unreachable!("hit kind matches geometry"),
+        };
+        Hit {
+            t,
+            point: ray.at(t),
+            geometric_normal: gn,
+            shading_normal: sn,
+            uv,
+            instance: index,
+            material: inst.material,
+        }
+    }
+}

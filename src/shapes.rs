@@ -21,6 +21,7 @@
 //! | `Paraboloid { radius, height }` | `y = h (x²+z²)/r²` | `0 <= y <= h`, open top |
 //! | `Hyperboloid { waist_radius, top_radius, half_height }` | one sheet, `(x²+z²)/a² - y²/c² = 1` | `\|y\| <= half_height`, radius `top_radius` at the ends |
 
+use std::f32::consts::{PI, TAU};
 use std::sync::Arc;
 
 use bevy_ecs::component::Component;
@@ -212,10 +213,61 @@ impl Shape {
         }
     }
 
-    /// The closest intersection with parameter in `(t_min, t_max)`, if any.
+    /// The closest intersection with parameter strictly inside
+    /// `(t_min, t_max)`, if any.
+    ///
+    /// `ray` is in object space and its direction need not be unit length:
+    /// `t` is the parameter along the direction as given. When the nearer
+    /// root of a quadric is outside the interval or outside the shape's
+    /// extent, the farther one is returned if it qualifies (rays starting
+    /// inside a closed shape, or entering an open one through its end).
+    ///
+    /// The normal is the outward geometric normal in object space (not
+    /// unit length, never flipped towards the ray). Texture coordinates:
+    ///
+    /// * sphere, ellipsoid: `(phi / 2pi, theta / pi)` where
+    ///   `phi = atan2(z, x)` in `[0, 2pi)` and `theta` is the polar angle
+    ///   from `+Y` (so `v = 0` at the top pole); for the ellipsoid both
+    ///   angles are taken on the unit sphere `p / radii`;
+    /// * plane: `(x, z)`;
+    /// * disk: `(x / r, z / r) * 0.5 + 0.5`, the disk's bounding square
+    ///   mapped to the unit square;
+    /// * polygon: coordinates of the hit point (measured from the
+    ///   object-space origin) along an orthonormal basis `(u, v)` of the
+    ///   polygon's plane, where `u` is the normalised projection of `+X`
+    ///   onto the plane (`+Z` when the normal is nearly parallel to `X`)
+    ///   and `v = u x n`; a polygon in `y = 0` facing `+Y` gets `(x, z)`,
+    ///   like the plane;
+    /// * cylinder, cone, paraboloid, hyperboloid: `(phi / 2pi, h)` with
+    ///   `phi = atan2(z, x)` in `[0, 2pi)` and `h` the height normalised to
+    ///   `[0, 1]` over the extent (`(y - y_min) / (y_max - y_min)`, `y / height`,
+    ///   `y / height`, `(y + half_height) / (2 half_height)` respectively).
+    ///
+    /// Returns `None` rather than a hit with a non-finite `t`, normal or
+    /// `uv`.
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<ShapeHit> {
-        let _ = (ray, t_min, t_max);
-        None
+        let hit = match self {
+            Shape::Sphere { radius } => intersect_sphere(ray, *radius, t_min, t_max),
+            Shape::Plane => intersect_plane(ray, t_min, t_max),
+            Shape::Disk { radius } => intersect_disk(ray, *radius, t_min, t_max),
+            Shape::Polygon { vertices } => intersect_polygon(ray, vertices, t_min, t_max),
+            Shape::Cylinder {
+                radius,
+                y_min,
+                y_max,
+            } => intersect_cylinder(ray, *radius, *y_min, *y_max, t_min, t_max),
+            Shape::Cone { radius, height } => intersect_cone(ray, *radius, *height, t_min, t_max),
+            Shape::Ellipsoid { radii } => intersect_ellipsoid(ray, *radii, t_min, t_max),
+            Shape::Paraboloid { radius, height } => {
+                intersect_paraboloid(ray, *radius, *height, t_min, t_max)
+            }
+            Shape::Hyperboloid {
+                waist_radius,
+                top_radius,
+                half_height,
+            } => intersect_hyperboloid(ray, *waist_radius, *top_radius, *half_height, t_min, t_max),
+        }?;
+        (hit.t.is_finite() && hit.normal.is_finite() && hit.uv.is_finite()).then_some(hit)
     }
 }
 
@@ -267,4 +319,280 @@ fn validate_polygon(vertices: &[Vec3]) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// Roots of `a t² + 2 half_b t + c = 0` in ascending order, given the
+/// quarter discriminant `disc = half_b² - a c >= 0` and `a != 0`.
+///
+/// Uses `q = -(half_b + sign(half_b) sqrt(disc))`, `t = q / a` and
+/// `t = c / q`: `half_b` and the square root are added with equal signs,
+/// so neither root suffers cancellation. `q = 0` only when `half_b = 0`
+/// and `disc = 0`, i.e. a double root at `0`.
+#[inline]
+fn quadratic_roots(a: f32, half_b: f32, c: f32, disc: f32) -> (f32, f32) {
+    let q = -(half_b + disc.sqrt().copysign(half_b));
+    if q == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (t0, t1) = (q / a, c / q);
+    if t0 <= t1 { (t0, t1) } else { (t1, t0) }
+}
+
+/// Roots of `a t² + 2 half_b t + c = 0`; a vanishing `a` is solved as the
+/// linear equation (returning its single root twice). `None` when there is
+/// no real root (or the coefficients are not finite).
+#[inline]
+fn solve_quadratic(a: f32, half_b: f32, c: f32) -> Option<(f32, f32)> {
+    if a == 0.0 {
+        if half_b == 0.0 {
+            return None;
+        }
+        let t = -c / (2.0 * half_b);
+        return Some((t, t));
+    }
+    let disc = half_b * half_b - a * c;
+    // Also rejects NaN (from non-finite coefficients).
+    if !(disc >= 0.0) {
+        return None;
+    }
+    Some(quadratic_roots(a, half_b, c, disc))
+}
+
+/// Roots of `|o + t d|² = r²` (a sphere of radius `r` around the origin;
+/// with the `y` components zeroed, an infinite cylinder around `Y`).
+///
+/// The discriminant is computed from the distance `|l|` of the centre to
+/// the line, `l = o - (o·d / d·d) d`, as `d·d (r - |l|)(r + |l|)`, which
+/// stays accurate when the origin is far away compared to `r` (the usual
+/// `(o·d)² - (d·d)(o·o - r²)` cancels catastrophically there). `None` for
+/// a zero direction.
+#[inline]
+fn centered_roots(o: Vec3A, d: Vec3A, r: f32) -> Option<(f32, f32)> {
+    let a = d.dot(d);
+    if !(a > 0.0) {
+        return None;
+    }
+    let half_b = o.dot(d);
+    let c = o.dot(o) - r * r;
+    let dist = (o - d * (half_b / a)).length();
+    let disc = a * ((r - dist) * (r + dist));
+    if !(disc >= 0.0) {
+        return None;
+    }
+    Some(quadratic_roots(a, half_b, c, disc))
+}
+
+/// The first of the ascending `roots` strictly inside `(t_min, t_max)`
+/// whose hit point is accepted by `inside` (the shape's extent).
+#[inline]
+fn pick_root(
+    roots: (f32, f32),
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    inside: impl Fn(Vec3A) -> bool,
+) -> Option<(f32, Vec3A)> {
+    [roots.0, roots.1]
+        .into_iter()
+        .filter(|&t| t > t_min && t < t_max)
+        .map(|t| (t, ray.at(t)))
+        .find(|&(_, p)| inside(p))
+}
+
+/// Azimuth `atan2(z, x)` mapped to `[0, 1]`.
+#[inline]
+fn azimuth_u(p: Vec3A) -> f32 {
+    let phi = p.z.atan2(p.x);
+    (if phi < 0.0 { phi + TAU } else { phi }) / TAU
+}
+
+/// `(phi / 2pi, theta / pi)` of the direction `p` (not necessarily unit),
+/// `theta` measured from `+Y`.
+#[inline]
+fn spherical_uv(p: Vec3A) -> Vec2 {
+    let cos_theta = (p.y / p.length()).clamp(-1.0, 1.0);
+    Vec2::new(azimuth_u(p), cos_theta.acos() / PI)
+}
+
+/// Sphere of radius `r` at the origin; normal `p`.
+fn intersect_sphere(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let roots = centered_roots(ray.origin, ray.direction, r)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
+    Some(ShapeHit {
+        t,
+        normal: p,
+        uv: spherical_uv(p),
+    })
+}
+
+/// Ellipsoid with semi-axes `radii`: the unit sphere in coordinates scaled
+/// by `1 / radii` (which leaves `t` unchanged); normal `p / radii²`.
+fn intersect_ellipsoid(ray: &Ray, radii: Vec3, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let radii = Vec3A::from(radii);
+    let roots = centered_roots(ray.origin / radii, ray.direction / radii, 1.0)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
+    Some(ShapeHit {
+        t,
+        normal: p / (radii * radii),
+        uv: spherical_uv(p / radii),
+    })
+}
+
+/// Parameter of the crossing with `y = 0`, if inside `(t_min, t_max)`.
+#[inline]
+fn hit_y0(ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, Vec3A)> {
+    if ray.direction.y == 0.0 {
+        return None;
+    }
+    let t = -ray.origin.y / ray.direction.y;
+    (t > t_min && t < t_max).then(|| (t, ray.at(t)))
+}
+
+/// The plane `y = 0`; normal `+Y`, `uv = (x, z)`.
+fn intersect_plane(ray: &Ray, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let (t, p) = hit_y0(ray, t_min, t_max)?;
+    Some(ShapeHit {
+        t,
+        normal: Vec3A::Y,
+        uv: Vec2::new(p.x, p.z),
+    })
+}
+
+/// Disk of radius `r` in `y = 0` (boundary included); normal `+Y`.
+fn intersect_disk(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let (t, p) = hit_y0(ray, t_min, t_max)?;
+    if p.x * p.x + p.z * p.z > r * r {
+        return None;
+    }
+    Some(ShapeHit {
+        t,
+        normal: Vec3A::Y,
+        uv: Vec2::new(p.x / r * 0.5 + 0.5, p.z / r * 0.5 + 0.5),
+    })
+}
+
+/// Convex polygon: the plane through the first vertex with the Newell
+/// normal `n`, then the hit point must lie on the inner side of every edge
+/// (`(b - a) x (p - a) · n >= 0`, boundary included).
+fn intersect_polygon(ray: &Ray, vertices: &[Vec3], t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let n = Vec3A::from(polygon_normal(vertices));
+    let denom = n.dot(ray.direction);
+    if denom == 0.0 || !denom.is_finite() {
+        return None;
+    }
+    let t = n.dot(Vec3A::from(vertices[0]) - ray.origin) / denom;
+    if !(t > t_min && t < t_max) {
+        return None;
+    }
+    let p = ray.at(t);
+    for (i, a) in vertices.iter().enumerate() {
+        let a = Vec3A::from(*a);
+        let b = Vec3A::from(vertices[(i + 1) % vertices.len()]);
+        if (b - a).cross(p - a).dot(n) < 0.0 {
+            return None;
+        }
+    }
+    let n_unit = n.normalize();
+    let reference = if n_unit.x.abs() < 0.9 {
+        Vec3A::X
+    } else {
+        Vec3A::Z
+    };
+    let u_axis = (reference - n_unit * n_unit.dot(reference)).normalize();
+    let v_axis = u_axis.cross(n_unit);
+    Some(ShapeHit {
+        t,
+        normal: n,
+        uv: Vec2::new(p.dot(u_axis), p.dot(v_axis)),
+    })
+}
+
+/// Open cylinder `x² + z² = r²`, `y_min <= y <= y_max`; normal `(x, 0, z)`.
+/// Rays parallel to the axis never hit the wall.
+fn intersect_cylinder(
+    ray: &Ray,
+    r: f32,
+    y_min: f32,
+    y_max: f32,
+    t_min: f32,
+    t_max: f32,
+) -> Option<ShapeHit> {
+    let flat = Vec3A::new(1.0, 0.0, 1.0);
+    let roots = centered_roots(ray.origin * flat, ray.direction * flat, r)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= y_min && p.y <= y_max)?;
+    Some(ShapeHit {
+        t,
+        normal: Vec3A::new(p.x, 0.0, p.z),
+        uv: Vec2::new(azimuth_u(p), (p.y - y_min) / (y_max - y_min)),
+    })
+}
+
+/// Open cone `x² + z² = k² (h - y)²` with `k = r / h`, `0 <= y <= h`;
+/// normal (half the gradient) `(x, k² (h - y), z)`, which vanishes at the
+/// apex, where `+Y` is returned instead.
+fn intersect_cone(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let (o, d) = (ray.origin, ray.direction);
+    let k = r / h;
+    let k2 = k * k;
+    // Distance below the apex, Y = h - y = y0 - t d.y.
+    let y0 = h - o.y;
+    let a = d.x * d.x + d.z * d.z - k2 * d.y * d.y;
+    let half_b = o.x * d.x + o.z * d.z + k2 * y0 * d.y;
+    let c = o.x * o.x + o.z * o.z - k2 * y0 * y0;
+    let roots = solve_quadratic(a, half_b, c)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= 0.0 && p.y <= h)?;
+    let normal = Vec3A::new(p.x, k2 * (h - p.y), p.z);
+    Some(ShapeHit {
+        t,
+        normal: if normal == Vec3A::ZERO {
+            Vec3A::Y
+        } else {
+            normal
+        },
+        uv: Vec2::new(azimuth_u(p), p.y / h),
+    })
+}
+
+/// Paraboloid `k (x² + z²) - y = 0` with `k = h / r²`, `0 <= y <= h`;
+/// normal (gradient) `(2 k x, -1, 2 k z)`. Rays parallel to the axis give
+/// a linear equation.
+fn intersect_paraboloid(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
+    let (o, d) = (ray.origin, ray.direction);
+    let k = h / (r * r);
+    let a = k * (d.x * d.x + d.z * d.z);
+    let half_b = k * (o.x * d.x + o.z * d.z) - 0.5 * d.y;
+    let c = k * (o.x * o.x + o.z * o.z) - o.y;
+    let roots = solve_quadratic(a, half_b, c)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= 0.0 && p.y <= h)?;
+    Some(ShapeHit {
+        t,
+        normal: Vec3A::new(2.0 * k * p.x, -1.0, 2.0 * k * p.z),
+        uv: Vec2::new(azimuth_u(p), p.y / h),
+    })
+}
+
+/// Hyperboloid of one sheet `x² + z² - m y² - w² = 0` where `w` is the
+/// waist radius and `m = (top² - w²) / half_height²` (so the radius is
+/// `top` at `y = ±half_height`), `|y| <= half_height`; normal (half the
+/// gradient) `(x, -m y, z)`.
+fn intersect_hyperboloid(
+    ray: &Ray,
+    w: f32,
+    top: f32,
+    half_height: f32,
+    t_min: f32,
+    t_max: f32,
+) -> Option<ShapeHit> {
+    let (o, d) = (ray.origin, ray.direction);
+    let m = (top - w) * (top + w) / (half_height * half_height);
+    let a = d.x * d.x + d.z * d.z - m * d.y * d.y;
+    let half_b = o.x * d.x + o.z * d.z - m * o.y * d.y;
+    let c = o.x * o.x + o.z * o.z - m * o.y * o.y - w * w;
+    let roots = solve_quadratic(a, half_b, c)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y.abs() <= half_height)?;
+    Some(ShapeHit {
+        t,
+        normal: Vec3A::new(p.x, -m * p.y, p.z),
+        uv: Vec2::new(azimuth_u(p), (p.y + half_height) / (2.0 * half_height)),
+    })
 }

@@ -1,1 +1,127 @@
-//! Integrators.
+//! Integrators: turn a [`RenderScene`] and a camera into a [`Film`].
+
+pub mod recursive;
+
+use glam::Vec2;
+
+use crate::camera::{Camera, CameraRays};
+use crate::film::Film;
+use crate::math::Color;
+use crate::rng::Sampler;
+use crate::scene::RenderScene;
+use crate::stats::RenderCounters;
+
+/// Settings shared by every integrator.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Image width in pixels, at least 1.
+    pub width: u32,
+    /// Image height in pixels, at least 1.
+    pub height: u32,
+    /// Samples per pixel, at least 1. One sample goes through the pixel
+    /// centre; more are jittered uniformly over the pixel (box filter).
+    pub spp: u32,
+    /// Maximum number of specular bounces after the camera ray.
+    pub max_depth: u32,
+    /// Secondary rays whose throughput (largest channel) falls below this
+    /// are not traced.
+    pub min_contribution: f32,
+    /// Seed of the sample keys.
+    pub seed: u64,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 480,
+            spp: 1,
+            max_depth: 8,
+            min_contribution: 1e-3,
+            seed: 0,
+        }
+    }
+}
+
+/// Largest image side accepted, to keep memory bounded.
+pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
+
+impl RenderSettings {
+    /// Rejects unusable settings with a message naming the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "image size must be at least 1x1, got {}x{}",
+                self.width, self.height
+            ));
+        }
+        if self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "image size {}x{} exceeds the maximum side of {MAX_IMAGE_SIDE} pixels",
+                self.width, self.height
+            ));
+        }
+        if self.spp == 0 {
+            return Err("samples per pixel must be at least 1".into());
+        }
+        if !(self.min_contribution >= 0.0 && self.min_contribution.is_finite()) {
+            return Err(format!(
+                "min contribution must be a finite non-negative number, got {}",
+                self.min_contribution
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Called with the number of rows finished since the last call.
+pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
+
+/// Film position of sample `s` of a pixel: the centre for a single sample,
+/// uniformly jittered otherwise.
+#[inline]
+pub fn film_sample(x: u32, y: u32, spp: u32, sampler: &mut Sampler) -> Vec2 {
+    if spp == 1 {
+        Vec2::new(x as f32 + 0.5, y as f32 + 0.5)
+    } else {
+        Vec2::new(x as f32 + sampler.next_f32(), y as f32 + sampler.next_f32())
+    }
+}
+
+/// Adds one sample to a pixel accumulator, dropping (and counting)
+/// non-finite samples so that none reaches the image.
+#[inline]
+pub fn accumulate(sum: &mut Color, valid: &mut u32, sample: Color, counters: &mut RenderCounters) {
+    if sample.is_finite() {
+        *sum += sample;
+        *valid += 1;
+    } else {
+        counters.nonfinite_samples += 1;
+    }
+}
+
+/// Prepares camera rays for the settings' image size.
+pub fn camera_rays(camera: &Camera, settings: &RenderSettings) -> CameraRays {
+    CameraRays::new(camera, settings.width, settings.height)
+}
+
+/// Which integrator renders the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum IntegratorKind {
+    /// Depth-first recursive Whitted tracing.
+    #[default]
+    Recursive,
+}
+
+/// Renders with the chosen integrator.
+pub fn render(
+    kind: IntegratorKind,
+    scene: &RenderScene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<Progress<'_>>,
+) -> (Film, RenderCounters) {
+    match kind {
+        IntegratorKind::Recursive => recursive::render(scene, camera, settings, progress),
+    }
+}

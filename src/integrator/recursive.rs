@@ -1,0 +1,97 @@
+//! The recursive Whitted tracer: depth-first, one ray at a time.
+
+use rayon::prelude::*;
+
+use super::{Progress, RenderSettings, accumulate, camera_rays, film_sample};
+use crate::camera::Camera;
+use crate::film::Film;
+use crate::math::{Color, Ray, max_component};
+use crate::rng::Sampler;
+use crate::scene::RenderScene;
+use crate::shading::{Interaction, RayKind, direct_light, scatter};
+use crate::stats::RenderCounters;
+
+/// Radiance arriving along `ray`; `depth` is the number of bounces so far
+/// and `throughput` the weight this radiance will be multiplied by on its
+/// way to the camera (used for the contribution threshold).
+pub fn trace(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    ray: &Ray,
+    depth: u32,
+    throughput: Color,
+    counters: &mut RenderCounters,
+) -> Color {
+    let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
+        return scene.background;
+    };
+    let it = Interaction::new(scene, ray, &hit);
+    let mut radiance = it.surface.emission;
+    if it.is_lit_by_lights() {
+        for light in &scene.lights {
+            if let Some(q) = direct_light(&it, light) {
+                counters.rays.shadow += 1;
+                if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                    radiance += q.radiance;
+                }
+            }
+        }
+    }
+    if depth < settings.max_depth {
+        for s in scatter(&it).into_iter().flatten() {
+            let t = throughput * s.weight;
+            if max_component(t) < settings.min_contribution {
+                continue;
+            }
+            match s.kind {
+                RayKind::Reflection => counters.rays.reflection += 1,
+                RayKind::Refraction => counters.rays.refraction += 1,
+                RayKind::Camera => counters.rays.camera += 1,
+            }
+            radiance += s.weight * trace(scene, settings, &s.ray, depth + 1, t, counters);
+        }
+    }
+    radiance
+}
+
+/// Renders every pixel with the recursive tracer, rows in parallel.
+pub fn render(
+    scene: &RenderScene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<Progress<'_>>,
+) -> (Film, RenderCounters) {
+    let mut film = Film::new(settings.width, settings.height);
+    let cam = camera_rays(camera, settings);
+    let width = settings.width as usize;
+    let counters = film
+        .pixels
+        .par_chunks_mut(width)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut counters = RenderCounters::default();
+            for (x, px) in row.iter_mut().enumerate() {
+                let pixel = (y * width + x) as u32;
+                let mut sum = Color::ZERO;
+                let mut valid = 0;
+                for s in 0..settings.spp {
+                    let mut sampler = Sampler::new(settings.seed, pixel, s);
+                    let p = film_sample(x as u32, y as u32, settings.spp, &mut sampler);
+                    let ray = cam.ray(p);
+                    counters.rays.camera += 1;
+                    let l = trace(scene, settings, &ray, 0, Color::ONE, &mut counters);
+                    accumulate(&mut sum, &mut valid, l, &mut counters);
+                }
+                *px = if valid > 0 { sum / valid as f32 } else { Color::ZERO };
+            }
+            if let Some(p) = progress {
+                p(1);
+            }
+            counters
+        })
+        .reduce(RenderCounters::default, |mut a, b| {
+            a.add(&b);
+            a
+        });
+    (film, counters)
+}
