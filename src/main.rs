@@ -190,7 +190,12 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             .unwrap_or(d.min_contribution),
         seed: args.seed.or(s.seed).unwrap_or(d.seed),
     };
-    settings.validate().map_err(Error::Invalid)?;
+    settings.validate().map_err(|e| {
+        Error::Invalid(format!(
+            "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
+            args.scene.display()
+        ))
+    })?;
     let png = PngOptions {
         exposure: args.exposure.or(s.exposure).unwrap_or(0.0),
         tone_map: match args.tonemap {
@@ -307,9 +312,11 @@ fn progress_bar(rows: u64, quiet: bool) -> Option<ProgressBar> {
     // Hidden automatically when stderr is not a terminal.
     let bar = ProgressBar::with_draw_target(Some(rows), ProgressDrawTarget::stderr());
     bar.set_style(
-        ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})")
-            .map(|s| s.progress_chars("=> "))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ProgressStyle::with_template(
+            "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
+        )
+        .map(|s| s.progress_chars("=> "))
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     Some(bar)
 }

@@ -206,6 +206,17 @@ pub(crate) fn padded_aabb(min: Vec3A, max: Vec3A) -> Aabb {
     Aabb::new(min - pad, max + pad)
 }
 
+/// Converts a ray for obvhs traversal.
+///
+/// Negative zeros in the direction are made positive: obvhs 0.4 picks the
+/// child order from `direction < 0` but the slab test's reciprocal from the
+/// sign bit, so a `-0.0` component makes CwBvh traversal miss boxes the ray
+/// passes through (found by `tests/bvh.rs`).
+#[inline]
+pub(crate) fn obvhs_ray(ray: &Ray, t_min: f32, t_max: f32) -> obvhs::ray::Ray {
+    obvhs::ray::Ray::new(ray.origin, ray.direction + Vec3A::ZERO, t_min, t_max)
+}
+
 /// Builds a CwBvh over boxes; the BVH's own `primitive_indices` map leaf
 /// slots back to positions in `boxes`.
 pub(crate) fn build_bvh(boxes: &[Aabb], quality: BuildQuality) -> CwBvh {
@@ -332,17 +343,13 @@ impl Mesh {
         self.corners[i]
     }
 
-    fn obvhs_ray(ray: &Ray, t_min: f32, t_max: f32) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new(ray.origin, ray.direction, t_min, t_max)
-    }
-
     /// Closest hit with `t` in `(t_min, t_max)`.
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit> {
         let wt = WatertightRay::new(ray);
         let mut best: Option<MeshHit> = None;
         let mut hit = obvhs::ray::RayHit::none();
         self.bvh
-            .ray_traverse(Self::obvhs_ray(ray, t_min, t_max), &mut hit, |r, id| {
+            .ray_traverse(obvhs_ray(ray, t_min, t_max), &mut hit, |r, id| {
                 let [p0, p1, p2] = self.corners[id];
                 match wt.intersect(p0, p1, p2, r.tmin, r.tmax) {
                     Some((t, b1, b2)) => {
@@ -360,13 +367,32 @@ impl Mesh {
         best
     }
 
+    /// Closest hit by testing every triangle: the reference for BVH tests.
+    pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit> {
+        let wt = WatertightRay::new(ray);
+        let mut best = None;
+        let mut t_max = t_max;
+        for (i, [p0, p1, p2]) in self.corners.iter().enumerate() {
+            if let Some((t, b1, b2)) = wt.intersect(*p0, *p1, *p2, t_min, t_max) {
+                t_max = t;
+                best = Some(MeshHit {
+                    t,
+                    triangle: i as u32,
+                    b1,
+                    b2,
+                });
+            }
+        }
+        best
+    }
+
     /// True if any triangle is hit with `t` in `(t_min, t_max)`; stops at
     /// the first one found.
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         let wt = WatertightRay::new(ray);
         !self
             .bvh
-            .ray_traverse_miss(Self::obvhs_ray(ray, t_min, t_max), |r, id| {
+            .ray_traverse_miss(obvhs_ray(ray, t_min, t_max), |r, id| {
                 let [p0, p1, p2] = self.corners[id];
                 wt.intersect(p0, p1, p2, r.tmin, r.tmax)
                     .map_or(f32::INFINITY, |h| h.0)

@@ -43,7 +43,11 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let r = 0.5 * (rs * rs + rp * rp);
-    if r.is_finite() { r.clamp(0.0, 1.0) } else { 1.0 }
+    if r.is_finite() {
+        r.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
 }
 
 /// Critical angle (radians) for light going from index `n1` into a less
@@ -138,7 +142,13 @@ mod tests {
 
     #[test]
     fn fresnel_at_normal_incidence() {
-        for &(n1, n2) in &[(1.0f32, 1.5f32), (1.5, 1.0), (1.0, 2.4), (1.0, 1.0), (1.33, 1.5)] {
+        for &(n1, n2) in &[
+            (1.0f32, 1.5f32),
+            (1.5, 1.0),
+            (1.0, 2.4),
+            (1.0, 1.0),
+            (1.33, 1.5),
+        ] {
             let expect = ((n1 - n2) / (n1 + n2)).powi(2);
             let got = fresnel_dielectric(1.0, n1 / n2);
             assert!((got - expect).abs() < 1e-6, "{n1}->{n2}: {got} vs {expect}");

@@ -146,9 +146,7 @@ pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
         }
         w.flush().map_err(|e| err(e.to_string()))?;
     }
-    tmp.as_file()
-        .sync_all()
-        .map_err(|e| err(e.to_string()))?;
+    tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
     tmp.persist(path).map_err(|e| err(e.error.to_string()))?;
     Ok(())
 }
@@ -174,7 +172,11 @@ pub fn read_image(path: &Path) -> Result<Film> {
             if is_exr {
                 c
             } else {
-                Color::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z))
+                Color::new(
+                    srgb_to_linear(c.x),
+                    srgb_to_linear(c.y),
+                    srgb_to_linear(c.z),
+                )
             }
         })
         .collect();
@@ -198,8 +200,14 @@ mod tests {
         // Middle grey 0.18 encodes to 118/255 in sRGB.
         let c = to_srgb8(Color::splat(0.18), &PngOptions::default());
         assert_eq!(c, [118, 118, 118]);
-        assert_eq!(to_srgb8(Color::splat(5.0), &PngOptions::default()), [255; 3]);
-        assert_eq!(to_srgb8(Color::splat(f32::NAN), &PngOptions::default()), [0; 3]);
+        assert_eq!(
+            to_srgb8(Color::splat(5.0), &PngOptions::default()),
+            [255; 3]
+        );
+        assert_eq!(
+            to_srgb8(Color::splat(f32::NAN), &PngOptions::default()),
+            [0; 3]
+        );
         let one_stop_down = PngOptions {
             exposure: -1.0,
             tone_map: ToneMap::Clamp,

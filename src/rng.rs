@@ -68,7 +68,13 @@ mod tests {
         }
         // Mean of U(0,1): 0.5 with standard error sqrt(1/12/n) = 9.1e-4; 5 sigma.
         assert!((sum / n as f64 - 0.5).abs() < 5.0 * 9.2e-4);
-        assert_ne!(Sampler::new(1, 2, 3).next_f32(), Sampler::new(2, 2, 3).next_f32());
-        assert_ne!(Sampler::new(1, 2, 3).next_f32(), Sampler::new(1, 2, 4).next_f32());
+        assert_ne!(
+            Sampler::new(1, 2, 3).next_f32(),
+            Sampler::new(2, 2, 3).next_f32()
+        );
+        assert_ne!(
+            Sampler::new(1, 2, 3).next_f32(),
+            Sampler::new(1, 2, 4).next_f32()
+        );
     }
 }

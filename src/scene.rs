@@ -11,7 +11,7 @@ use obvhs::{aabb::Aabb, cwbvh::CwBvh};
 use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
-use crate::mesh::{BuildQuality, Mesh, build_bvh, padded_aabb};
+use crate::mesh::{BuildQuality, Mesh, build_bvh, obvhs_ray, padded_aabb};
 use crate::shapes::Shape;
 use crate::transform::{InstanceTransform, Transform};
 
@@ -196,9 +196,15 @@ impl RenderScene {
         let inst = &self.instances[index as usize];
         let local = to_object(inst, ray);
         match &inst.geometry {
-            InstanceGeometry::Shape(s) => s
-                .intersect(&local, t_min, t_max)
-                .map(|h| (h.t, LocalHit::Shape { normal: h.normal, uv: h.uv })),
+            InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).map(|h| {
+                (
+                    h.t,
+                    LocalHit::Shape {
+                        normal: h.normal,
+                        uv: h.uv,
+                    },
+                )
+            }),
             InstanceGeometry::Mesh(m) => m
                 .intersect(&local, t_min, t_max)
                 .map(|h| (h.t, LocalHit::Mesh(h))),
@@ -226,7 +232,7 @@ impl RenderScene {
             }
         }
         if !self.tlas_instances.is_empty() {
-            let oray = obvhs::ray::Ray::new(ray.origin, ray.direction, t_min, t_max);
+            let oray = obvhs_ray(ray, t_min, t_max);
             let mut rh = obvhs::ray::RayHit::none();
             self.tlas.ray_traverse(oray, &mut rh, |r, slot| {
                 let inst = self.tlas_instances[slot];
@@ -256,7 +262,7 @@ impl RenderScene {
         if self.tlas_instances.is_empty() {
             return false;
         }
-        let oray = obvhs::ray::Ray::new(ray.origin, ray.direction, t_min, t_max);
+        let oray = obvhs_ray(ray, t_min, t_max);
         !self.tlas.ray_traverse_miss(oray, |r, slot| {
             if self.occludes_instance(self.tlas_instances[slot], ray, r.tmin, r.tmax) {
                 r.tmin
@@ -264,6 +270,37 @@ impl RenderScene {
                 f32::INFINITY
             }
         })
+    }
+
+    /// The closest hit found by testing every instance, and every triangle
+    /// of every mesh, without any BVH: the reference that BVH traversal is
+    /// tested against.
+    pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut best: Option<(f32, u32, LocalHit)> = None;
+        let mut t_max = t_max;
+        for (i, inst) in self.instances.iter().enumerate() {
+            let local = to_object(inst, ray);
+            let found = match &inst.geometry {
+                InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).map(|h| {
+                    (
+                        h.t,
+                        LocalHit::Shape {
+                            normal: h.normal,
+                            uv: h.uv,
+                        },
+                    )
+                }),
+                InstanceGeometry::Mesh(m) => m
+                    .intersect_brute_force(&local, t_min, t_max)
+                    .map(|h| (h.t, LocalHit::Mesh(h))),
+            };
+            if let Some((t, h)) = found {
+                t_max = t;
+                best = Some((t, i as u32, h));
+            }
+        }
+        let (t, index, local) = best?;
+        Some(self.finish_hit(ray, t, index, local))
     }
 
     fn finish_hit(&self, ray: &Ray, t: f32, index: u32, local: LocalHit) -> Hit {
@@ -283,7 +320,9 @@ impl RenderScene {
                 }
                 (gn, sn, s.uv)
             }
-            (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => unreachable!("hit kind matches geometry"),
+            (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => {
+                unreachable!("hit kind matches geometry")
+            }
         };
         Hit {
             t,

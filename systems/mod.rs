@@ -198,7 +198,9 @@ pub fn extract_scene(
     objects.sort_by_key(|o| o.0);
     for (e, t, g, m) in objects {
         if !t.is_valid() {
-            out.error = Some(format!("entity {e}: transform is not finite and invertible"));
+            out.error = Some(format!(
+                "entity {e}: transform is not finite and invertible"
+            ));
             return;
         }
         let id = out.materials.len() as u32;
@@ -261,10 +263,48 @@ pub fn render_frame(
         return fail(&mut frame, "no acceleration structure was built".into());
     };
     let start = Instant::now();
-    let progress = config.progress.as_deref().map(|p| p as integrator::Progress<'_>);
+    let progress = config
+        .progress
+        .as_deref()
+        .map(|p| p as integrator::Progress<'_>);
     let (film, counters) =
         integrator::render(config.integrator, scene, camera, &config.settings, progress);
     frame.render_seconds = start.elapsed().as_secs_f64();
     frame.film = Some(film);
     frame.counters = counters;
+}
+
+/// Renders a loaded scene in a fresh world: spawns it, runs one frame and
+/// returns the frame. `camera` indexes the scene's cameras in file order.
+///
+/// ```no_run
+/// use prism::{loader, mesh::BuildQuality, systems};
+/// let desc = loader::load("assets/whitted.toml".as_ref(), BuildQuality::Medium)?;
+/// let frame = systems::render_scene_desc(desc, systems::RenderConfig::default(), 0)?;
+/// let film = frame.film.expect("rendered");
+/// assert_eq!(film.width, 640);
+/// # Ok::<(), prism::Error>(())
+/// ```
+pub fn render_scene_desc(
+    desc: SceneDesc,
+    mut config: RenderConfig,
+    camera: usize,
+) -> crate::Result<Frame> {
+    let mut world = World::new();
+    let mut schedule = setup(&mut world);
+    config.background = desc.background;
+    let cameras = spawn_scene(&mut world, desc);
+    config.camera = Some(*cameras.get(camera).ok_or_else(|| {
+        crate::Error::Invalid(format!(
+            "camera {camera} requested but the scene has {} camera(s)",
+            cameras.len()
+        ))
+    })?);
+    world.insert_resource(config);
+    schedule.run(&mut world);
+    let frame = world.remove_resource::<Frame>().unwrap_or_default();
+    match &frame.error {
+        Some(e) => Err(crate::Error::Invalid(e.clone())),
+        None => Ok(frame),
+    }
 }

@@ -82,7 +82,11 @@ pub fn render(
                     let l = trace(scene, settings, &ray, 0, Color::ONE, &mut counters);
                     accumulate(&mut sum, &mut valid, l, &mut counters);
                 }
-                *px = if valid > 0 { sum / valid as f32 } else { Color::ZERO };
+                *px = if valid > 0 {
+                    sum / valid as f32
+                } else {
+                    Color::ZERO
+                };
             }
             if let Some(p) = progress {
                 p(1);

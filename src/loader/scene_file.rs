@@ -288,8 +288,8 @@ impl Ctx<'_> {
             ..Default::default()
         };
         if let Some(bg) = file.settings.background {
-            scene.background = non_negative("settings.background", Color::from(bg))
-                .map_err(|m| self.err(m))?;
+            scene.background =
+                non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
         }
         if let Some(c) = &file.camera {
             scene.cameras.push(self.camera(c).map_err(|m| self.err(m))?);
@@ -321,7 +321,8 @@ impl Ctx<'_> {
             let place = self
                 .placement(&inc.placement)
                 .map_err(|msg| self.err(format!("gltf[{i}]: {msg}")))?;
-            let mut sub = crate::loader::gltf::load_gltf(&self.base.join(&inc.path), self.quality)?;
+            let mut sub = crate::loader::gltf::load_gltf(&self.base.join(&inc.path), self.quality)
+                .map_err(|e| self.err(format!("gltf[{i}]: {e}")))?;
             for o in &mut sub.objects {
                 o.transform = Transform(place.0 * o.transform.0);
             }

@@ -1,0 +1,240 @@
+//! Runs the `prism` binary as a user would: bad input must give a clear
+//! message and a non-zero exit, never a panic and never an output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn prism() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_prism"))
+}
+
+fn corpus() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")
+}
+
+fn assets() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
+}
+
+/// Asserts a clean failure: non-zero status that is not a panic (101),
+/// an `error:` message, and no output file.
+fn assert_clean_failure(out: &Output, output_file: &Path, must_mention: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let code = out.status.code();
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr: {stderr}"
+    );
+    assert_ne!(code, Some(101), "prism panicked: {stderr}");
+    assert!(code.is_some(), "killed by a signal: {stderr}");
+    assert!(
+        !stderr.contains("panicked"),
+        "panic message in stderr: {stderr}"
+    );
+    assert!(stderr.contains("error"), "no error message: {stderr}");
+    for m in must_mention {
+        assert!(
+            stderr.to_lowercase().contains(&m.to_lowercase()),
+            "message should mention {m:?}: {stderr}"
+        );
+    }
+    assert!(
+        !output_file.exists(),
+        "a failed run left {} behind",
+        output_file.display()
+    );
+}
+
+fn render(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    prism()
+        .arg("render")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .arg("--quiet")
+        .args(extra)
+        .output()
+        .expect("run prism")
+}
+
+/// What each corpus file's message must contain besides its file name.
+fn expected_words(name: &str) -> &'static [&'static str] {
+    match name {
+        "malformed_json.gltf" | "empty.gltf" => &["json"],
+        "missing_buffer.gltf" => &["does_not_exist.bin"],
+        "missing_texture.gltf" => &["no_such_texture.png"],
+        "node_cycle.gltf" => &["cycle"],
+        "index_out_of_range.gltf" => &["index"],
+        "nan_radius.toml" | "negative_radius.toml" => &["radius"],
+        "zero_size.toml" => &["size"],
+        "unknown_key.toml" => &["radus"],
+        "unknown_material.toml" => &["unobtainium"],
+        "nan_light.toml" => &["intensity"],
+        "degenerate_camera.toml" => &["camera"],
+        "missing_include.toml" => &["model.gltf"],
+        "singular_scale.toml" => &["scale"],
+        "nonconvex_polygon.toml" => &["convex"],
+        _ => &[],
+    }
+}
+
+#[test]
+fn every_corpus_file_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut count = 0;
+    for entry in std::fs::read_dir(corpus()).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_str().unwrap().to_string();
+        if name.ends_with(".md") {
+            continue;
+        }
+        count += 1;
+        let out_file = dir.path().join(format!("{name}.png"));
+        // No size on the command line: the scene's own settings must be checked.
+        let out = render(&path, &out_file, &[]);
+        let mut words = vec![name.as_str()];
+        words.extend_from_slice(expected_words(&name));
+        assert_clean_failure(&out, &out_file, &words);
+    }
+    assert!(count >= 15, "corpus has only {count} files");
+}
+
+#[test]
+fn zero_image_size_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("a.png");
+    for size in [["--width", "0"], ["--height", "0"]] {
+        let out = prism()
+            .arg("render")
+            .arg(assets().join("whitted.toml"))
+            .arg("-o")
+            .arg(&out_file)
+            .args(size)
+            .output()
+            .unwrap();
+        assert_clean_failure(&out, &out_file, &["size"]);
+    }
+}
+
+#[test]
+fn unknown_option_is_rejected() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("a.png");
+    let out = render(&assets().join("whitted.toml"), &out_file, &["--frobnicate"]);
+    assert_clean_failure(&out, &out_file, &["--frobnicate"]);
+}
+
+#[test]
+fn missing_scene_and_bad_output_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("a.png");
+    let out = render(&dir.path().join("nope.toml"), &out_file, &[]);
+    assert_clean_failure(&out, &out_file, &["nope.toml"]);
+
+    let bmp = dir.path().join("a.bmp");
+    let out = render(&assets().join("whitted.toml"), &bmp, &[]);
+    assert_clean_failure(&out, &bmp, &["a.bmp", ".png"]);
+
+    let nested = dir.path().join("no/such/dir/a.png");
+    let out = render(&assets().join("whitted.toml"), &nested, &[]);
+    assert_clean_failure(&out, &nested, &["a.png"]);
+
+    let out = render(
+        &assets().join("whitted.toml"),
+        &out_file,
+        &["--camera", "5"],
+    );
+    assert_clean_failure(&out, &out_file, &["camera"]);
+
+    let out = render(
+        &assets().join("whitted.toml"),
+        &out_file,
+        &["--threads", "0"],
+    );
+    assert_clean_failure(&out, &out_file, &["threads"]);
+
+    let out = render(&dir.path().join("scene.obj"), &out_file, &[]);
+    assert_clean_failure(&out, &out_file, &["scene.obj"]);
+}
+
+#[test]
+fn help_explains_every_option() {
+    let out = prism().args(["render", "--help"]).output().unwrap();
+    assert!(out.status.success());
+    let help = String::from_utf8_lossy(&out.stdout);
+    for opt in [
+        "--output",
+        "--width",
+        "--height",
+        "--spp",
+        "--max-depth",
+        "--min-contribution",
+        "--threads",
+        "--seed",
+        "--camera",
+        "--stats",
+        "--exposure",
+        "--tonemap",
+        "--integrator",
+        "--bvh-quality",
+    ] {
+        assert!(help.contains(opt), "--help lacks {opt}:\n{help}");
+    }
+}
+
+#[test]
+fn stats_file_reports_the_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("w.exr");
+    let stats = dir.path().join("w.json");
+    let out = render(
+        &assets().join("whitted.toml"),
+        &out_file,
+        &[
+            "--stats",
+            stats.to_str().unwrap(),
+            "--threads",
+            "2",
+            "--width",
+            "16",
+            "--height",
+            "12",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    for key in [
+        "wall_seconds",
+        "bvh_build_seconds",
+        "render_seconds",
+        "mrays_per_second",
+        "width",
+        "height",
+        "spp",
+        "threads",
+        "triangles",
+        "primitives",
+        "nonfinite_samples",
+    ] {
+        assert!(json.get(key).is_some(), "stats lack {key}: {json}");
+    }
+    let rays = &json["rays"];
+    assert_eq!(rays["camera"], 16 * 12);
+    // The glass and mirror spheres are in view: both kinds of secondary ray.
+    assert!(rays["reflection"].as_u64().unwrap() > 0);
+    assert!(rays["refraction"].as_u64().unwrap() > 0);
+    assert!(rays["shadow"].as_u64().unwrap() > 0);
+    let total = ["camera", "shadow", "reflection", "refraction"]
+        .iter()
+        .map(|k| rays[k].as_u64().unwrap())
+        .sum::<u64>();
+    assert_eq!(rays["total"].as_u64().unwrap(), total);
+    assert_eq!(json["threads"], 2);
+    assert_eq!(json["nonfinite_samples"], 0);
+    assert_eq!(json["primitives"], 3);
+}
