@@ -433,7 +433,7 @@ fn intersect_ellipsoid(ray: &Ray, radii: Vec3, t_min: f32, t_max: f32) -> Option
     let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
     Some(ShapeHit {
         t,
-        normal: p / (radii * radii),
+        normal: p / radii,
         uv: spherical_uv(p / radii),
     })
 }
@@ -519,7 +519,7 @@ fn intersect_cylinder(
 ) -> Option<ShapeHit> {
     let flat = Vec3A::new(1.0, 0.0, 1.0);
     let roots = centered_roots(ray.origin * flat, ray.direction * flat, r)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
+    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= y_min && p.y <= y_max)?;
     Some(ShapeHit {
         t,
         normal: Vec3A::new(p.x, 0.0, p.z),

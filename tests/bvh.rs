@@ -1,0 +1,281 @@
+//! BVH traversal against brute force: the top-level BVH over instances and
+//! every mesh's triangle BVH must return exactly the closest hit that
+//! testing every primitive finds, and shadow queries must agree with it.
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{Quat, Vec3, Vec3A};
+use prism::material::Material;
+use prism::math::Ray;
+use prism::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
+use prism::rng::Sampler;
+use prism::scene::{Instance, InstanceGeometry, RenderScene};
+use prism::shapes::Shape;
+use prism::transform::Transform;
+
+struct Rng(Sampler);
+
+impl Rng {
+    fn new(seed: u64) -> Self {
+        Rng(Sampler::new(seed, 0, 0))
+    }
+    fn f(&mut self) -> f32 {
+        self.0.next_f32()
+    }
+    fn range(&mut self, a: f32, b: f32) -> f32 {
+        a + (b - a) * self.f()
+    }
+    fn vec(&mut self, a: f32, b: f32) -> Vec3 {
+        Vec3::new(self.range(a, b), self.range(a, b), self.range(a, b))
+    }
+    fn dir(&mut self) -> Vec3 {
+        let z = self.range(-1.0, 1.0);
+        let phi = self.range(0.0, 2.0 * PI);
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+}
+
+/// A triangle soup of `n` random triangles in the unit cube.
+fn soup(rng: &mut Rng, n: usize) -> Mesh {
+    let mut data = MeshData::default();
+    for i in 0..n {
+        let c = rng.vec(-1.0, 1.0);
+        for _ in 0..3 {
+            data.positions.push(c + rng.vec(-0.2, 0.2));
+        }
+        let k = 3 * i as u32;
+        data.indices.push([k, k + 1, k + 2]);
+    }
+    Mesh::new("soup", data, NormalMode::Flat, BuildQuality::Medium).unwrap()
+}
+
+/// A closed UV sphere mesh with shared vertices.
+fn uv_sphere(seg: u32, rings: u32) -> Mesh {
+    let mut data = MeshData::default();
+    for j in 0..=rings {
+        let th = PI * j as f32 / rings as f32;
+        for i in 0..=seg {
+            let ph = 2.0 * PI * i as f32 / seg as f32;
+            data.positions
+                .push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+        }
+    }
+    for j in 0..rings {
+        for i in 0..seg {
+            let a = j * (seg + 1) + i;
+            let b = a + seg + 1;
+            data.indices.push([a, a + 1, b]);
+            data.indices.push([a + 1, b + 1, b]);
+        }
+    }
+    Mesh::new("sphere", data, NormalMode::Smooth, BuildQuality::Fast).unwrap()
+}
+
+fn all_shapes() -> Vec<Shape> {
+    vec![
+        Shape::Sphere { radius: 0.7 },
+        Shape::Disk { radius: 0.8 },
+        Shape::Polygon {
+            vertices: Arc::from(vec![
+                Vec3::new(-0.5, 0.0, -0.5),
+                Vec3::new(-0.5, 0.0, 0.5),
+                Vec3::new(0.6, 0.0, 0.4),
+                Vec3::new(0.5, 0.0, -0.5),
+            ]),
+        },
+        Shape::Cylinder {
+            radius: 0.4,
+            y_min: -0.5,
+            y_max: 0.6,
+        },
+        Shape::Cone {
+            radius: 0.5,
+            height: 1.0,
+        },
+        Shape::Ellipsoid {
+            radii: Vec3::new(0.8, 0.4, 0.3),
+        },
+        Shape::Paraboloid {
+            radius: 0.5,
+            height: 0.8,
+        },
+        Shape::Hyperboloid {
+            waist_radius: 0.3,
+            top_radius: 0.6,
+            half_height: 0.5,
+        },
+    ]
+}
+
+fn random_transform(rng: &mut Rng, spread: f32) -> Transform {
+    let axis = rng.dir();
+    let angle = rng.range(0.0, 2.0 * PI);
+    let scale = Vec3::new(rng.range(0.3, 2.0), rng.range(0.3, 2.0), rng.range(0.3, 2.0));
+    Transform::from_trs(
+        rng.vec(-spread, spread),
+        Quat::from_axis_angle(axis, angle),
+        scale,
+    )
+}
+
+fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
+    let mut instances = Vec::new();
+    let meshes = [Arc::new(soup(rng, 300)), Arc::new(uv_sphere(24, 12))];
+    for k in 0..60 {
+        let geometry = if k % 4 == 0 {
+            InstanceGeometry::Mesh(meshes[(k / 4) % 2].clone())
+        } else {
+            let shapes = all_shapes();
+            InstanceGeometry::Shape(shapes[k % shapes.len()].clone())
+        };
+        instances.push(Instance::new(geometry, &random_transform(rng, 6.0), 0));
+    }
+    if with_plane {
+        instances.push(Instance::new(
+            InstanceGeometry::Shape(Shape::Plane),
+            &Transform::from_translation(Vec3::new(0.0, -7.0, 0.0)),
+            0,
+        ));
+    }
+    RenderScene::new(
+        instances,
+        vec![Material::default()],
+        vec![],
+        Vec3::ZERO,
+        BuildQuality::Medium,
+    )
+}
+
+fn check_rays(scene: &RenderScene, rays: &[Ray]) -> usize {
+    let mut hits = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        let bvh = scene.intersect(ray, 0.0, f32::INFINITY);
+        let brute = scene.intersect_brute_force(ray, 0.0, f32::INFINITY);
+        match (bvh, brute) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                hits += 1;
+                // The same kernels run on the same floats: the distances are
+                // identical; the instance may differ only on an exact tie.
+                assert_eq!(a.t, b.t, "ray {i} {ray:?}");
+                if a.instance != b.instance {
+                    assert_eq!(a.t, b.t);
+                } else {
+                    assert_eq!(a, b, "ray {i}");
+                }
+            }
+            (a, b) => panic!("ray {i} {ray:?}: bvh {a:?} brute force {b:?}"),
+        }
+        let occluded = scene.occluded(ray, 0.0, f32::INFINITY);
+        assert_eq!(occluded, brute.is_some(), "shadow query of ray {i} {ray:?}");
+        if let Some(b) = brute {
+            // A segment ending just before the closest hit is unoccluded.
+            assert!(
+                !scene.occluded(ray, 0.0, b.t * 0.999),
+                "segment before the hit of ray {i}"
+            );
+        }
+    }
+    hits
+}
+
+#[test]
+fn closest_hits_equal_brute_force_on_random_rays() {
+    let mut rng = Rng::new(42);
+    let scene = random_scene(&mut rng, true);
+    let mut rays = Vec::new();
+    for _ in 0..4000 {
+        // From outside towards the middle, and from anywhere inside.
+        let o = rng.dir() * 15.0;
+        let target = rng.vec(-6.0, 6.0);
+        rays.push(Ray::new(o.into(), (target - o).normalize().into()));
+        rays.push(Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()));
+    }
+    let hits = check_rays(&scene, &rays);
+    assert!(hits > 2000, "only {hits} hits: the test would prove little");
+}
+
+#[test]
+fn axis_aligned_rays_with_signed_zeros() {
+    // Directions with exact (and negative) zero components exercise the
+    // slab test's reciprocal of zero.
+    let mut rng = Rng::new(7);
+    let scene = random_scene(&mut rng, false);
+    let mut rays = Vec::new();
+    for _ in 0..500 {
+        let o = rng.vec(-7.0, 7.0);
+        for axis in 0..3 {
+            for sign in [1.0f32, -1.0] {
+                for zero in [0.0f32, -0.0] {
+                    let mut d = Vec3A::splat(zero);
+                    d[axis] = sign;
+                    rays.push(Ray::new(o.into(), d));
+                }
+            }
+        }
+    }
+    let hits = check_rays(&scene, &rays);
+    assert!(hits > 300, "only {hits} hits");
+}
+
+#[test]
+fn mesh_bvh_equals_brute_force_for_every_build_preset() {
+    let mut rng = Rng::new(3);
+    let data = {
+        let mut d = MeshData::default();
+        for i in 0..2000u32 {
+            let c = rng.vec(-1.0, 1.0);
+            for _ in 0..3 {
+                d.positions.push(c + rng.vec(-0.1, 0.1));
+            }
+            d.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        d
+    };
+    for q in [
+        BuildQuality::Fastest,
+        BuildQuality::VeryFast,
+        BuildQuality::Fast,
+        BuildQuality::Medium,
+        BuildQuality::Slow,
+        BuildQuality::VerySlow,
+    ] {
+        let mesh = Mesh::new("soup", data.clone(), NormalMode::Flat, q).unwrap();
+        assert_eq!(mesh.triangle_count(), 2000);
+        let mut hits = 0;
+        for _ in 0..3000 {
+            let o = rng.dir() * 3.0;
+            let ray = Ray::new(o.into(), (rng.vec(-1.0, 1.0) - o).normalize().into());
+            let a = mesh.intersect(&ray, 0.0, f32::INFINITY);
+            let b = mesh.intersect_brute_force(&ray, 0.0, f32::INFINITY);
+            assert_eq!(a.map(|h| h.t), b.map(|h| h.t), "{q:?} {ray:?}");
+            assert_eq!(mesh.occluded(&ray, 0.0, f32::INFINITY), b.is_some());
+            hits += a.is_some() as usize;
+        }
+        assert!(hits > 1000, "{q:?}: {hits}");
+    }
+}
+
+#[test]
+fn empty_and_degenerate_scenes() {
+    let empty = RenderScene::new(vec![], vec![], vec![], Vec3::ZERO, BuildQuality::Medium);
+    let ray = Ray::new(Vec3A::ZERO, Vec3A::X);
+    assert!(empty.intersect(&ray, 0.0, f32::INFINITY).is_none());
+    assert!(!empty.occluded(&ray, 0.0, f32::INFINITY));
+    // A mesh whose only triangle has zero area can never be hit.
+    let flat = Mesh::new(
+        "degenerate",
+        MeshData {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
+            indices: vec![[0, 1, 2]],
+            ..Default::default()
+        },
+        NormalMode::Smooth,
+        BuildQuality::Medium,
+    )
+    .unwrap();
+    let ray = Ray::new(Vec3A::new(1.0, 1.0, 0.0), -Vec3A::Y);
+    assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_none());
+}
