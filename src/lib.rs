@@ -42,3 +42,8 @@ pub mod transform;
 pub mod systems;
 
 pub use error::{Error, Result};
+
+/// The README's code examples, compiled as doctests.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

@@ -206,6 +206,10 @@ pub(crate) fn padded_aabb(min: Vec3A, max: Vec3A) -> Aabb {
     Aabb::new(min - pad, max + pad)
 }
 
+/// Largest coordinate magnitude accepted in a BVH. Beyond it box surface
+/// areas overflow f32 and obvhs's builder breaks (seen panicking at 1.7e38).
+pub const MAX_COORDINATE: f32 = 1.0e15;
+
 /// Converts a ray for obvhs traversal.
 ///
 /// Negative zeros in the direction are made positive: obvhs 0.4 picks the
@@ -243,6 +247,15 @@ impl Mesh {
         let n = data.positions.len();
         if let Some(i) = data.positions.iter().position(|p| !p.is_finite()) {
             return Err(format!("vertex {i} has a non-finite position"));
+        }
+        if let Some(i) = data
+            .positions
+            .iter()
+            .position(|p| p.abs().max_element() > MAX_COORDINATE)
+        {
+            return Err(format!(
+                "vertex {i} lies farther than {MAX_COORDINATE:e} from the origin"
+            ));
         }
         if let Some(normals) = &data.normals {
             if normals.len() != n {

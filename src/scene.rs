@@ -11,7 +11,7 @@ use obvhs::{aabb::Aabb, cwbvh::CwBvh};
 use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
-use crate::mesh::{BuildQuality, Mesh, build_bvh, obvhs_ray, padded_aabb};
+use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, build_bvh, obvhs_ray, padded_aabb};
 use crate::shapes::Shape;
 use crate::transform::{InstanceTransform, Transform};
 
@@ -45,7 +45,9 @@ impl Instance {
         }
     }
 
-    /// World-space bounds, `None` if unbounded (planes) or empty.
+    /// World-space bounds, `None` if unbounded (planes), empty, or too
+    /// large for the BVH builder (beyond [`MAX_COORDINATE`]); such
+    /// instances are tested one by one instead.
     pub fn world_bounds(&self) -> Option<Aabb> {
         let (lo, hi) = match &self.geometry {
             InstanceGeometry::Shape(s) => s.bounds()?,
@@ -64,7 +66,8 @@ impl Instance {
             wlo = wlo.min(w);
             whi = whi.max(w);
         }
-        (wlo.is_finite() && whi.is_finite()).then(|| padded_aabb(wlo, whi))
+        let fits = |v: Vec3A| v.is_finite() && v.abs().max_element() <= MAX_COORDINATE;
+        (fits(wlo) && fits(whi)).then(|| padded_aabb(wlo, whi))
     }
 }
 
@@ -148,8 +151,11 @@ impl RenderScene {
                     bounded.push(i as u32);
                 }
                 None => {
-                    // A mesh without triangles can never be hit; planes can.
-                    if matches!(inst.geometry, InstanceGeometry::Shape(_)) {
+                    // A mesh without triangles can never be hit; planes and
+                    // huge objects are tested one by one.
+                    let empty_mesh = matches!(&inst.geometry,
+                        InstanceGeometry::Mesh(m) if m.triangle_count() == 0);
+                    if !empty_mesh {
                         unbounded.push(i as u32);
                     }
                 }

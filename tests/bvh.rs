@@ -58,8 +58,11 @@ fn uv_sphere(seg: u32, rings: u32) -> Mesh {
         let th = PI * j as f32 / rings as f32;
         for i in 0..=seg {
             let ph = 2.0 * PI * i as f32 / seg as f32;
-            data.positions
-                .push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+            data.positions.push(Vec3::new(
+                th.sin() * ph.cos(),
+                th.cos(),
+                th.sin() * ph.sin(),
+            ));
         }
     }
     for j in 0..rings {
@@ -112,7 +115,11 @@ fn all_shapes() -> Vec<Shape> {
 fn random_transform(rng: &mut Rng, spread: f32) -> Transform {
     let axis = rng.dir();
     let angle = rng.range(0.0, 2.0 * PI);
-    let scale = Vec3::new(rng.range(0.3, 2.0), rng.range(0.3, 2.0), rng.range(0.3, 2.0));
+    let scale = Vec3::new(
+        rng.range(0.3, 2.0),
+        rng.range(0.3, 2.0),
+        rng.range(0.3, 2.0),
+    );
     Transform::from_trs(
         rng.vec(-spread, spread),
         Quat::from_axis_angle(axis, angle),

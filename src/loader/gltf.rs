@@ -23,8 +23,9 @@
 //!   in B), emissive factor and texture scaled by
 //!   `KHR_materials_emissive_strength`, `KHR_materials_transmission`
 //!   (factor), `KHR_materials_ior`, and `KHR_materials_specular` (factor
-//!   and colour: the dielectric F0 is `0.04 * specularFactor *
-//!   specularColorFactor`, so a factor of 0 leaves a Lambertian surface).
+//!   and colour: the dielectric F0 is `((ior-1)/(ior+1))^2 * specularFactor *
+//!   specularColorFactor`, 0.04 for the default ior of 1.5, so a factor of
+//!   0 leaves a Lambertian surface).
 //!   Primitives without a material get the glTF default material (white,
 //!   metallic 1, roughness 1). `KHR_texture_transform` is honoured.
 //! * **Textures.** PNG and JPEG images (external files, data URIs or
@@ -93,7 +94,8 @@ use crate::error::Error;
 use crate::light::Light;
 use crate::material::{ImageTexture, Material, Texture, UvTransform};
 use crate::math::Color;
-use crate::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
+use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, MeshData, NormalMode};
+use crate::output::srgb_to_linear;
 use crate::transform::Transform;
 
 /// Deepest node hierarchy accepted.
@@ -104,10 +106,6 @@ const MAX_NODE_VISITS: usize = 1 << 22;
 /// Most elements of a sparse accessor without a base buffer view (its
 /// size is not bounded by the file's size).
 const MAX_SPARSE_ELEMENTS: usize = 1 << 27;
-/// Largest coordinate accepted for vertex positions, in object and in
-/// world space: far beyond any real scene, small enough that BVH surface
-/// area costs cannot overflow `f32`.
-const MAX_COORDINATE: f32 = 1.0e12;
 
 /// Loads a glTF 2.0 file (`.gltf` or `.glb`) into a [`SceneDesc`].
 ///
@@ -752,15 +750,6 @@ fn build_primitive(
 // Materials and textures
 // ---------------------------------------------------------------------------
 
-/// Standard sRGB transfer function, decoding.
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 /// Decodes image `index` (once; cached).
 fn decoded_image<'s>(
     ctx: &Ctx,
@@ -987,7 +976,10 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
     let emission = emissive * strength;
     check_color(emission, "emission (factor times strength)", &label)?;
 
-    let dielectric_f0: Color = 0.04 * specular_factor * specular_color;
+    // F0 of a dielectric from its index of refraction (0.04 for 1.5), as
+    // the glTF specification derives it, scaled by KHR_materials_specular.
+    let f0_ior = ((ior - 1.0) / (ior + 1.0)).powi(2);
+    let dielectric_f0: Color = f0_ior * specular_factor * specular_color;
     let mut material = Material::from_metallic_roughness(
         base,
         metallic,
@@ -2000,7 +1992,7 @@ mod tests {
         let message = error_of(&write(dir.path(), "farvertex.gltf", &doc));
         assert!(message.contains("vertex 0 position"), "{message}");
         let mut doc = quad_doc(embedded(QUAD));
-        doc["nodes"] = json!([{"name": "giant", "mesh": 0, "scale": [1e13, 1, 1]}]);
+        doc["nodes"] = json!([{"name": "giant", "mesh": 0, "scale": [1e16, 1, 1]}]);
         let message = error_of(&write(dir.path(), "giant.gltf", &doc));
         assert!(
             message.contains("'giant'") && message.contains("farther"),
