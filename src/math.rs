@@ -5,7 +5,8 @@ use glam::{Vec3, Vec3A};
 /// Linear RGB radiance or reflectance.
 pub type Color = Vec3;
 
-/// A ray `origin + t * direction` valid for `t` in `[tmin, tmax)`.
+/// A ray `origin + t * direction`; intersection routines take the open
+/// interval `(t_min, t_max)` of `t` they search.
 ///
 /// The direction is not required to be normalised: rays transformed into
 /// object space keep the world-space parameter `t`, so their direction is

@@ -295,28 +295,47 @@ fn validate_polygon(vertices: &[Vec3]) -> Result<(), String> {
     if vertices.iter().any(|v| !v.is_finite()) {
         return Err("polygon vertices must be finite".into());
     }
-    let n = polygon_normal(vertices);
-    let extent = vertices
-        .iter()
-        .map(|v| v.abs().max_element())
-        .fold(0.0f32, f32::max);
-    if !(n.length() > 1e-6 * extent * extent) {
+    // Tolerances scale with the polygon's own size, measured from its
+    // centroid, not with its distance from the origin.
+    let centroid = vertices.iter().copied().sum::<Vec3>() / vertices.len() as f32;
+    let local: Vec<Vec3> = vertices.iter().map(|v| *v - centroid).collect();
+    let size = local.iter().map(|v| v.length()).fold(0.0f32, f32::max);
+    let n = polygon_normal(&local);
+    if !(size > 0.0 && n.length() > 1e-6 * size * size) {
         return Err("polygon has zero area".into());
     }
     let n = n.normalize();
-    let scale = extent.max(1e-30);
-    for v in vertices {
-        if (n.dot(*v - vertices[0])).abs() > 1e-4 * scale {
-            return Err("polygon vertices are not coplanar".into());
-        }
+    if local.iter().any(|v| n.dot(*v).abs() > 1e-4 * size) {
+        return Err("polygon vertices are not coplanar".into());
     }
-    for i in 0..vertices.len() {
-        let a = vertices[i];
-        let b = vertices[(i + 1) % vertices.len()];
-        let c = vertices[(i + 2) % vertices.len()];
-        if (b - a).cross(c - b).dot(n) < -1e-6 * scale * scale {
+    // Convex and simple: every turn is to the left, and the turns add up
+    // to one full revolution (a star polygon turns left everywhere but
+    // winds twice).
+    let (u, w) = {
+        let u = (local[0] - n * n.dot(local[0])).normalize_or(n.any_orthonormal_vector());
+        (u, n.cross(u))
+    };
+    let mut turning = 0.0f32;
+    let count = local.len();
+    for i in 0..count {
+        let a = local[i];
+        let b = local[(i + 1) % count];
+        let c = local[(i + 2) % count];
+        let (e0, e1) = (b - a, c - b);
+        if e0.cross(e1).dot(n) < -1e-6 * size * size {
             return Err("polygon is not convex (or its vertices are not in order)".into());
         }
+        let angle = |e: Vec3| e.dot(w).atan2(e.dot(u));
+        let mut turn = angle(e1) - angle(e0);
+        if turn <= -std::f32::consts::PI {
+            turn += 2.0 * std::f32::consts::PI;
+        } else if turn > std::f32::consts::PI {
+            turn -= 2.0 * std::f32::consts::PI;
+        }
+        turning += turn;
+    }
+    if (turning - 2.0 * std::f32::consts::PI).abs() > 1e-2 {
+        return Err("polygon is not convex: its edges wind around more than once (a star?)".into());
     }
     Ok(())
 }
@@ -1289,6 +1308,17 @@ mod tests {
                 ]),
             ),
             (
+                "pentagram (turns left everywhere, winds twice)",
+                poly(
+                    &(0..5)
+                        .map(|k| {
+                            let a = (2 * k % 5) as f32 * 2.0 * std::f32::consts::PI / 5.0;
+                            [a.cos(), 0.0, -a.sin()]
+                        })
+                        .collect::<Vec<_>>(),
+                ),
+            ),
+            (
                 "NaN",
                 poly(&[[0.0; 3], [0.0, 0.0, 1.0], [f32::NAN, 0.0, 0.0]]),
             ),
@@ -1297,6 +1327,16 @@ mod tests {
                 poly(&[[0.0; 3], [0.0, 0.0, 1.0], [f32::INFINITY, 0.0, 0.0]]),
             ),
         ];
+        // Far from the origin, a unit square is as valid as near it.
+        for offset in [1e3f32, 1e4, 1e6] {
+            let far = poly(&[
+                [offset, 0.0, 0.0],
+                [offset, 0.0, 1.0],
+                [offset + 1.0, 0.0, 1.0],
+                [offset + 1.0, 0.0, 0.0],
+            ]);
+            assert!(far.validate().is_ok(), "unit square at x = {offset}");
+        }
         for (what, shape) in bad {
             assert!(shape.validate().is_err(), "{what} accepted");
             // Invalid polygons must not panic or produce NaN either.
