@@ -403,16 +403,42 @@ fn centered_roots(o: Vec3A, d: Vec3A, r: f32) -> Option<(f32, f32)> {
 
 /// The first of the ascending `roots` strictly inside `(t_min, t_max)`
 /// whose hit point is accepted by `inside` (the shape's extent).
+///
+/// Each root is first refined by Newton steps on the implicit function
+/// `f` (which returns the value and the gradient at a point). The
+/// quadratic's coefficients are large when the ray starts far away, and
+/// the rounding they carry puts the hit point off the surface by far more
+/// than its own ulps (seen: 2.6e-4 on a cone 10 units from the camera);
+/// `f` evaluated at the hit point itself involves only small numbers, so
+/// two steps bring the point back to within a few ulps of the surface and
+/// shadow and secondary rays leave from the right side.
 #[inline]
 fn pick_root(
     roots: (f32, f32),
     ray: &Ray,
     t_min: f32,
     t_max: f32,
+    f: impl Fn(Vec3A) -> (f32, Vec3A),
     inside: impl Fn(Vec3A) -> bool,
 ) -> Option<(f32, Vec3A)> {
+    let refine = |mut t: f32| {
+        for _ in 0..2 {
+            let (value, grad) = f(ray.at(t));
+            let slope = grad.dot(ray.direction);
+            let step = value / slope;
+            // Only small corrections: a large step means a grazing ray or
+            // a vanishing gradient, where the root is better left alone.
+            if step.is_finite() && step.abs() <= 1e-3 * t.abs().max(1e-3) {
+                t -= step;
+            } else {
+                break;
+            }
+        }
+        t
+    };
     [roots.0, roots.1]
         .into_iter()
+        .map(refine)
         .filter(|&t| t > t_min && t < t_max)
         .map(|t| (t, ray.at(t)))
         .find(|&(_, p)| inside(p))
@@ -436,7 +462,8 @@ fn spherical_uv(p: Vec3A) -> Vec2 {
 /// Sphere of radius `r` at the origin; normal `p`.
 fn intersect_sphere(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
     let roots = centered_roots(ray.origin, ray.direction, r)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
+    let f = |p: Vec3A| ((p.length() - r) * (p.length() + r), 2.0 * p);
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |_| true)?;
     Some(ShapeHit {
         t,
         normal: p,
@@ -449,7 +476,11 @@ fn intersect_sphere(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHi
 fn intersect_ellipsoid(ray: &Ray, radii: Vec3, t_min: f32, t_max: f32) -> Option<ShapeHit> {
     let radii = Vec3A::from(radii);
     let roots = centered_roots(ray.origin / radii, ray.direction / radii, 1.0)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |_| true)?;
+    let f = |p: Vec3A| {
+        let q = p / radii;
+        ((q.length() - 1.0) * (q.length() + 1.0), 2.0 * q / radii)
+    };
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |_| true)?;
     Some(ShapeHit {
         t,
         normal: p / (radii * radii),
@@ -538,7 +569,13 @@ fn intersect_cylinder(
 ) -> Option<ShapeHit> {
     let flat = Vec3A::new(1.0, 0.0, 1.0);
     let roots = centered_roots(ray.origin * flat, ray.direction * flat, r)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= y_min && p.y <= y_max)?;
+    let f = |p: Vec3A| {
+        let l = (p.x * p.x + p.z * p.z).sqrt();
+        ((l - r) * (l + r), Vec3A::new(2.0 * p.x, 0.0, 2.0 * p.z))
+    };
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| {
+        p.y >= y_min && p.y <= y_max
+    })?;
     Some(ShapeHit {
         t,
         normal: Vec3A::new(p.x, 0.0, p.z),
@@ -559,7 +596,15 @@ fn intersect_cone(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Option<S
     let half_b = o.x * d.x + o.z * d.z + k2 * y0 * d.y;
     let c = o.x * o.x + o.z * o.z - k2 * y0 * y0;
     let roots = solve_quadratic(a, half_b, c)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= 0.0 && p.y <= h)?;
+    let f = |p: Vec3A| {
+        let l = (p.x * p.x + p.z * p.z).sqrt();
+        let ry = k * (h - p.y);
+        (
+            (l - ry) * (l + ry),
+            Vec3A::new(2.0 * p.x, 2.0 * k2 * (h - p.y), 2.0 * p.z),
+        )
+    };
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| p.y >= 0.0 && p.y <= h)?;
     let normal = Vec3A::new(p.x, k2 * (h - p.y), p.z);
     Some(ShapeHit {
         t,
@@ -582,7 +627,13 @@ fn intersect_paraboloid(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Op
     let half_b = k * (o.x * d.x + o.z * d.z) - 0.5 * d.y;
     let c = k * (o.x * o.x + o.z * o.z) - o.y;
     let roots = solve_quadratic(a, half_b, c)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y >= 0.0 && p.y <= h)?;
+    let f = |p: Vec3A| {
+        (
+            k * (p.x * p.x + p.z * p.z) - p.y,
+            Vec3A::new(2.0 * k * p.x, -1.0, 2.0 * k * p.z),
+        )
+    };
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| p.y >= 0.0 && p.y <= h)?;
     Some(ShapeHit {
         t,
         normal: Vec3A::new(2.0 * k * p.x, -1.0, 2.0 * k * p.z),
@@ -608,7 +659,13 @@ fn intersect_hyperboloid(
     let half_b = o.x * d.x + o.z * d.z - m * o.y * d.y;
     let c = o.x * o.x + o.z * o.z - m * o.y * o.y - w * w;
     let roots = solve_quadratic(a, half_b, c)?;
-    let (t, p) = pick_root(roots, ray, t_min, t_max, |p| p.y.abs() <= half_height)?;
+    let f = |p: Vec3A| {
+        (
+            p.x * p.x + p.z * p.z - m * p.y * p.y - w * w,
+            Vec3A::new(2.0 * p.x, -2.0 * m * p.y, 2.0 * p.z),
+        )
+    };
+    let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| p.y.abs() <= half_height)?;
     Some(ShapeHit {
         t,
         normal: Vec3A::new(p.x, -m * p.y, p.z),
