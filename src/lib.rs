@@ -31,6 +31,7 @@ pub mod math;
 pub mod mesh;
 pub mod optics;
 pub mod output;
+pub mod queues;
 pub mod rng;
 pub mod scene;
 pub mod shading;

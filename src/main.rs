@@ -79,6 +79,9 @@ struct RenderArgs {
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
+    /// Paths (pixel samples) per wavefront batch: bounds queue memory.
+    #[arg(long, default_value_t = prism::integrator::wavefront::DEFAULT_BATCH_PATHS)]
+    batch_paths: usize,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -97,8 +100,19 @@ enum ToneMapArg {
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum IntegratorArg {
-    /// Depth-first recursive Whitted tracing.
+    /// Depth-first recursive Whitted tracing, one ray at a time.
     Recursive,
+    /// Breadth-first wavefront tracing over SoA queues, one ECS system per stage.
+    Wavefront,
+}
+
+impl From<IntegratorArg> for IntegratorKind {
+    fn from(a: IntegratorArg) -> Self {
+        match a {
+            IntegratorArg::Recursive => IntegratorKind::Recursive,
+            IntegratorArg::Wavefront => IntegratorKind::Wavefront,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -230,11 +244,13 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
     });
+    if args.batch_paths == 0 {
+        return Err(Error::Invalid("--batch-paths must be at least 1".into()));
+    }
+    world.insert_resource(systems::wavefront::BatchSize(args.batch_paths));
     world.insert_resource(RenderConfig {
         settings: settings.clone(),
-        integrator: match args.integrator {
-            IntegratorArg::Recursive => IntegratorKind::Recursive,
-        },
+        integrator: args.integrator.into(),
         camera: Some(cameras[args.camera]),
         bvh_quality: quality,
         background,
@@ -264,7 +280,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let render_seconds = frame.render_seconds;
     let stats = RenderStats {
         scene: args.scene.display().to_string(),
-        integrator: "recursive".into(),
+        integrator: IntegratorKind::from(args.integrator).name().into(),
         wall_seconds: wall.elapsed().as_secs_f64(),
         load_seconds,
         bvh_build_seconds: mesh_build_seconds + tlas_seconds,
@@ -280,6 +296,12 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         primitives,
         lights: light_count,
         nonfinite_samples: frame.counters.nonfinite_samples,
+        wavefront: frame.wavefront.map(|w| prism::stats::WavefrontStatsJson {
+            stage_seconds: w.stages,
+            peak_queue_bytes: w.peak_queue_bytes,
+            batches: w.batches,
+            batch_paths: world.resource::<systems::wavefront::BatchSize>().0,
+        }),
     };
     if let Some(path) = &args.stats {
         write_stats(path, &stats)?;

@@ -193,6 +193,47 @@ impl Default for Material {
     }
 }
 
+/// Which shading kernel a material needs: the wavefront integrator sorts
+/// hits into one queue per class so that each kernel handles one kind of
+/// surface without branching on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MaterialClass {
+    /// Only emission (or nothing): no lights, no secondary rays.
+    Emissive,
+    /// Lambert and/or Blinn-Phong lobes lit by the lights, no secondary rays.
+    Diffuse,
+    /// A perfect mirror only.
+    Mirror,
+    /// A smooth dielectric only.
+    Glass,
+    /// Any combination of the above (glTF materials are always here).
+    General,
+}
+
+impl MaterialClass {
+    /// Every class, in the order the wavefront shades them.
+    pub const ALL: [MaterialClass; 5] = [
+        MaterialClass::Emissive,
+        MaterialClass::Diffuse,
+        MaterialClass::Mirror,
+        MaterialClass::Glass,
+        MaterialClass::General,
+    ];
+
+    /// Does this class evaluate the lights (shadow rays)?
+    pub fn is_lit(self) -> bool {
+        matches!(self, MaterialClass::Diffuse | MaterialClass::General)
+    }
+
+    /// Can this class spawn reflection or refraction rays?
+    pub fn scatters(self) -> bool {
+        matches!(
+            self,
+            MaterialClass::Mirror | MaterialClass::Glass | MaterialClass::General
+        )
+    }
+}
+
 /// A material evaluated at one surface point: what the shading kernels read.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceSample {
@@ -293,6 +334,26 @@ impl Material {
                 dielectric_f0,
             }),
             ..Default::default()
+        }
+    }
+
+    /// The shading kernel this material needs. A class never omits a lobe
+    /// the material has, so shading by class gives exactly the radiance of
+    /// shading every lobe.
+    pub fn class(&self) -> MaterialClass {
+        if self.metallic_roughness.is_some() {
+            return MaterialClass::General;
+        }
+        let lit = (self.diffuse > 0.0 && self.base_color.max_element() > 0.0)
+            || self.specular.max_element() > 0.0;
+        let mirror = self.mirror.max_element() > 0.0;
+        let glass = self.transmission > 0.0;
+        match (lit, mirror, glass) {
+            (false, false, false) => MaterialClass::Emissive,
+            (true, false, false) => MaterialClass::Diffuse,
+            (false, true, false) => MaterialClass::Mirror,
+            (false, false, true) => MaterialClass::Glass,
+            _ => MaterialClass::General,
         }
     }
 

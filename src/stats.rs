@@ -99,6 +99,22 @@ pub struct RenderStats {
     pub lights: usize,
     /// Samples that were NaN or infinite, kept out of the image.
     pub nonfinite_samples: u64,
+    /// Wavefront only: time per stage and queue memory.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wavefront: Option<WavefrontStatsJson>,
+}
+
+/// The wavefront integrator's own figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct WavefrontStatsJson {
+    /// Seconds per stage.
+    pub stage_seconds: crate::integrator::wavefront::StageSeconds,
+    /// Largest total of bytes held by all queues at once.
+    pub peak_queue_bytes: usize,
+    /// Number of batches.
+    pub batches: usize,
+    /// Paths per batch.
+    pub batch_paths: usize,
 }
 
 impl From<RayCounts> for RayCountsJson {

@@ -10,12 +10,15 @@
 //!    from the world ([`extract_scene`]);
 //! 2. [`PrismSystems::Accelerate`]: build the top-level BVH
 //!    ([`build_acceleration`]);
-//! 3. [`PrismSystems::Render`]: trace the image into [`Frame`]
-//!    ([`render_frame`]).
+//! 3. [`PrismSystems::Render`]: trace the image into [`Frame`], with
+//!    [`render_recursive`] or, stage by stage, with the wavefront systems
+//!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]).
 //!
 //! This module is compiled as part of the `prism` crate (one crate keeps
 //! the build short and the binary simple); the kernels in `src/` never
 //! refer to it.
+
+pub mod wavefront;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -26,6 +29,7 @@ use bevy_ecs::schedule::ScheduleLabel;
 use crate::camera::Camera;
 use crate::desc::{Geometry, SceneDesc};
 use crate::film::Film;
+use crate::integrator::wavefront::WavefrontReport;
 use crate::integrator::{self, IntegratorKind, RenderSettings};
 use crate::light::{Light, WorldLight};
 use crate::material::Material;
@@ -117,6 +121,8 @@ pub struct Frame {
     pub counters: RenderCounters,
     /// Seconds spent tracing.
     pub render_seconds: f64,
+    /// Stage times and queue memory, for wavefront frames.
+    pub wavefront: Option<WavefrontReport>,
 }
 
 /// Adds Prism's stages to `schedule` in order.
@@ -132,7 +138,12 @@ pub fn add_render_systems(schedule: &mut Schedule) {
     schedule.add_systems((
         extract_scene.in_set(PrismSystems::Extract),
         build_acceleration.in_set(PrismSystems::Accelerate),
-        render_frame.in_set(PrismSystems::Render),
+        render_recursive
+            .run_if(integrator_is(IntegratorKind::Recursive))
+            .in_set(PrismSystems::Render),
+        wavefront::render_wavefront
+            .run_if(integrator_is(IntegratorKind::Wavefront))
+            .in_set(PrismSystems::Render),
     ));
 }
 
@@ -143,6 +154,7 @@ pub fn setup(world: &mut World) -> Schedule {
     world.init_resource::<ExtractedScene>();
     world.init_resource::<SceneAccel>();
     world.init_resource::<Frame>();
+    wavefront::add_wavefront_schedules(world);
     let mut schedule = Schedule::new(RenderFrame);
     add_render_systems(&mut schedule);
     schedule
@@ -238,37 +250,57 @@ pub fn build_acceleration(
     accel.build_seconds = start.elapsed().as_secs_f64();
 }
 
-/// Stage 3: renders the image with the configured integrator.
-pub fn render_frame(
-    config: Res<RenderConfig>,
-    extracted: Res<ExtractedScene>,
-    accel: Res<SceneAccel>,
-    mut frame: ResMut<Frame>,
-) {
-    *frame = Frame::default();
-    let fail = |frame: &mut Frame, msg: String| frame.error = Some(msg);
-    if let Some(e) = &extracted.error {
-        return fail(&mut frame, e.clone());
+/// Run condition: the configured integrator is `kind`.
+pub fn integrator_is(kind: IntegratorKind) -> impl Fn(Res<RenderConfig>) -> bool + Clone {
+    move |config: Res<RenderConfig>| config.integrator == kind
+}
+
+/// Checks what every integrator needs before it can trace: a valid
+/// camera, valid settings and a built scene. On failure it records the
+/// reason in [`Frame`] and returns `None`.
+pub fn frame_preconditions(world: &mut World) -> Option<(Arc<RenderScene>, Camera)> {
+    *world.resource_mut::<Frame>() = Frame::default();
+    let extracted = world.resource::<ExtractedScene>();
+    let result = (|| {
+        if let Some(e) = &extracted.error {
+            return Err(e.clone());
+        }
+        let camera = extracted
+            .camera
+            .clone()
+            .ok_or_else(|| "the scene has no camera".to_string())?;
+        camera.validate()?;
+        world.resource::<RenderConfig>().settings.validate()?;
+        let scene = world
+            .resource::<SceneAccel>()
+            .scene
+            .clone()
+            .ok_or_else(|| "no acceleration structure was built".to_string())?;
+        Ok((scene, camera))
+    })();
+    match result {
+        Ok(v) => Some(v),
+        Err(e) => {
+            world.resource_mut::<Frame>().error = Some(e);
+            None
+        }
     }
-    let Some(camera) = &extracted.camera else {
-        return fail(&mut frame, "the scene has no camera".into());
+}
+
+/// Stage 3, recursive integrator: renders every pixel depth-first.
+pub fn render_recursive(world: &mut World) {
+    let Some((scene, camera)) = frame_preconditions(world) else {
+        return;
     };
-    if let Err(e) = camera.validate() {
-        return fail(&mut frame, e);
-    }
-    if let Err(e) = config.settings.validate() {
-        return fail(&mut frame, e);
-    }
-    let Some(scene) = &accel.scene else {
-        return fail(&mut frame, "no acceleration structure was built".into());
-    };
+    let config = world.resource::<RenderConfig>().clone();
     let start = Instant::now();
     let progress = config
         .progress
         .as_deref()
         .map(|p| p as integrator::Progress<'_>);
     let (film, counters) =
-        integrator::render(config.integrator, scene, camera, &config.settings, progress);
+        integrator::recursive::render(&scene, &camera, &config.settings, progress);
+    let mut frame = world.resource_mut::<Frame>();
     frame.render_seconds = start.elapsed().as_secs_f64();
     frame.film = Some(film);
     frame.counters = counters;

@@ -1,14 +1,13 @@
 //! Integrators: turn a [`RenderScene`] and a camera into a [`Film`].
 
 pub mod recursive;
+pub mod wavefront;
 
 use glam::Vec2;
 
 use crate::camera::{Camera, CameraRays};
-use crate::film::Film;
 use crate::math::Color;
 use crate::rng::Sampler;
-use crate::scene::RenderScene;
 use crate::stats::RenderCounters;
 
 /// Settings shared by every integrator.
@@ -106,22 +105,25 @@ pub fn camera_rays(camera: &Camera, settings: &RenderSettings) -> CameraRays {
 }
 
 /// Which integrator renders the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
 pub enum IntegratorKind {
-    /// Depth-first recursive Whitted tracing.
+    /// Depth-first recursive Whitted tracing, one ray at a time.
     #[default]
     Recursive,
+    /// Breadth-first wavefront tracing over structure-of-arrays queues,
+    /// one ECS system per stage.
+    Wavefront,
 }
 
-/// Renders with the chosen integrator.
-pub fn render(
-    kind: IntegratorKind,
-    scene: &RenderScene,
-    camera: &Camera,
-    settings: &RenderSettings,
-    progress: Option<Progress<'_>>,
-) -> (Film, RenderCounters) {
-    match kind {
-        IntegratorKind::Recursive => recursive::render(scene, camera, settings, progress),
+impl IntegratorKind {
+    /// Both integrators.
+    pub const ALL: [IntegratorKind; 2] = [IntegratorKind::Recursive, IntegratorKind::Wavefront];
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Recursive => "recursive",
+            IntegratorKind::Wavefront => "wavefront",
+        }
     }
 }

@@ -1,0 +1,395 @@
+//! Wavefront kernels: each stage drains one queue and fills others.
+//!
+//! These are plain functions over the queues in [`crate::queues`]; the ECS
+//! systems in `systems/wavefront.rs` call them, and the order of the
+//! stages is declared there, once. Every stage
+//! splits its queue into fixed-size chunks processed in parallel and joins
+//! the chunks' output in chunk order, so queue contents, and therefore
+//! images, do not depend on the number of threads.
+//!
+//! The math is the recursive tracer's: [`scene::RenderScene::intersect`],
+//! [`shading::Interaction`], [`shading::direct_light`] and
+//! [`shading::scatter`]. Only the control flow differs.
+//!
+//! [`scene::RenderScene::intersect`]: crate::scene::RenderScene::intersect
+//! [`shading::Interaction`]: crate::shading::Interaction
+//! [`shading::direct_light`]: crate::shading::direct_light
+//! [`shading::scatter`]: crate::shading::scatter
+
+use rayon::prelude::*;
+
+use super::{RenderSettings, accumulate, film_sample};
+use crate::camera::CameraRays;
+use crate::film::Film;
+use crate::material::MaterialClass;
+use crate::math::{Color, max_component};
+use crate::queues::{
+    EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
+};
+use crate::rng::Sampler;
+use crate::scene::{Hit, RenderScene};
+use crate::shading::{Interaction, RayKind, direct_light, scatter};
+use crate::stats::{RayCounts, RenderCounters};
+
+/// Items per parallel work chunk: large enough to amortise scheduling,
+/// small enough to balance two to a few dozen threads.
+pub const CHUNK: usize = 1024;
+
+/// Default number of paths (pixel samples) per batch.
+pub const DEFAULT_BATCH_PATHS: usize = 1 << 16;
+
+/// Wall time spent in each stage, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageSeconds {
+    /// Generating camera rays.
+    pub generate_camera_rays: f64,
+    /// Closest-hit traversal and routing of rays to queues.
+    pub intersect_closest: f64,
+    /// Adding the background for escaped rays.
+    pub handle_escaped_rays: f64,
+    /// Shading, all material classes.
+    pub shade: f64,
+    /// Tracing shadow rays.
+    pub trace_shadow_rays: f64,
+    /// Adding finished paths to the film.
+    pub update_film: f64,
+}
+
+impl StageSeconds {
+    /// Sum of all stages.
+    pub fn total(&self) -> f64 {
+        self.generate_camera_rays
+            + self.intersect_closest
+            + self.handle_escaped_rays
+            + self.shade
+            + self.trace_shadow_rays
+            + self.update_film
+    }
+}
+
+/// Hit queues, one per material class.
+#[derive(Clone, Debug, Default)]
+pub struct ClassQueues {
+    /// One queue per [`MaterialClass`], indexed by `class as usize`.
+    pub queues: [HitQueue; 5],
+}
+
+impl ClassQueues {
+    /// The queue of `class`.
+    pub fn get(&self, class: MaterialClass) -> &HitQueue {
+        &self.queues[class as usize]
+    }
+
+    /// Bytes allocated by all five queues.
+    pub fn bytes(&self) -> usize {
+        self.queues.iter().map(|q| q.bytes()).sum()
+    }
+}
+
+/// Where each batch starts and how many paths it has.
+pub fn batch_ranges(
+    settings: &RenderSettings,
+    batch_paths: usize,
+) -> impl Iterator<Item = (u64, usize)> {
+    let total = settings.width as u64 * settings.height as u64 * settings.spp as u64;
+    let step = batch_paths.max(1) as u64;
+    (0..total.div_ceil(step)).map(move |b| {
+        let first = b * step;
+        (first, (total - first).min(step) as usize)
+    })
+}
+
+/// Stage: one camera ray per path of the batch `[first, first + count)`.
+/// Path `p` is sample `p % spp` of pixel `p / spp`, with the same film
+/// position and sample keys as the recursive tracer.
+pub fn generate_camera_rays(
+    camera: &CameraRays,
+    settings: &RenderSettings,
+    first: u64,
+    count: usize,
+    out: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    out.clear();
+    let spp = settings.spp as u64;
+    let width = settings.width as u64;
+    for local in 0..count {
+        let p = first + local as u64;
+        let pixel = p / spp;
+        let sample = (p % spp) as u32;
+        let (x, y) = ((pixel % width) as u32, (pixel / width) as u32);
+        let mut sampler = Sampler::new(settings.seed, pixel as u32, sample);
+        let ray = camera.ray(film_sample(x, y, settings.spp, &mut sampler));
+        out.push(RayItem {
+            ray,
+            throughput: Color::ONE,
+            path: local as u32,
+            depth: 0,
+        });
+    }
+    rays.camera += count as u64;
+}
+
+/// Stage: closest hit for every ray of `rays`; misses go to `escaped`,
+/// hits to the queue of their material's class. `scratch` keeps the
+/// per-ray results between calls.
+pub fn intersect_closest(
+    scene: &RenderScene,
+    classes: &[MaterialClass],
+    rays: &RayQueue,
+    scratch: &mut Vec<Option<Hit>>,
+    escaped: &mut EscapedQueue,
+    hits: &mut ClassQueues,
+) {
+    scratch.clear();
+    scratch.resize(rays.len(), None);
+    scratch
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let base = c * CHUNK;
+            for (i, slot) in out.iter_mut().enumerate() {
+                *slot = scene.intersect(&rays.ray(base + i), 0.0, f32::INFINITY);
+            }
+        });
+    for (i, hit) in scratch.iter().enumerate() {
+        let (path, throughput, depth) = (rays.path[i], rays.throughput[i], rays.depth[i]);
+        match hit {
+            None => escaped.push(path, throughput),
+            Some(h) => {
+                let class = classes[h.material as usize];
+                hits.queues[class as usize].push(HitItem {
+                    direction: rays.direction[i],
+                    point: h.point,
+                    geometric_normal: h.geometric_normal,
+                    shading_normal: h.shading_normal,
+                    uv: h.uv,
+                    material: h.material,
+                    throughput,
+                    path,
+                    depth,
+                });
+            }
+        }
+    }
+}
+
+/// Stage: escaped rays bring back the background.
+pub fn handle_escaped_rays(escaped: &EscapedQueue, background: Color, radiance: &mut [Color]) {
+    for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
+        radiance[path as usize] += t * background;
+    }
+}
+
+/// What one chunk of a shading stage produced.
+#[derive(Default)]
+struct ShadeOutput {
+    emitted: Vec<(u32, Color)>,
+    shadows: ShadowQueue,
+    rays: RayQueue,
+    counts: RayCounts,
+}
+
+/// Stage: shades every hit of one material class. Emission goes straight
+/// to the path's radiance; lit classes push one shadow ray per light that
+/// can contribute; scattering classes push reflection and refraction rays
+/// above the contribution threshold, up to the maximum depth.
+///
+/// `LIT` and `SCATTER` select the lobes the class has, so each class's
+/// kernel runs only the code it needs.
+#[allow(clippy::too_many_arguments)]
+pub fn shade<const LIT: bool, const SCATTER: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    hits: &HitQueue,
+    radiance: &mut [Color],
+    shadows: &mut ShadowQueue,
+    next: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    let outputs: Vec<ShadeOutput> = (0..hits.len().div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut out = ShadeOutput::default();
+            let end = ((c + 1) * CHUNK).min(hits.len());
+            for i in c * CHUNK..end {
+                let h = hits.get(i);
+                let hit = Hit {
+                    t: 0.0,
+                    point: h.point,
+                    geometric_normal: h.geometric_normal,
+                    shading_normal: h.shading_normal,
+                    uv: h.uv,
+                    instance: 0,
+                    material: h.material,
+                };
+                let ray = crate::math::Ray::new(h.point, h.direction);
+                let it = Interaction::new(scene, &ray, &hit);
+                if it.surface.emission != Color::ZERO {
+                    out.emitted
+                        .push((h.path, h.throughput * it.surface.emission));
+                }
+                if LIT && it.is_lit_by_lights() {
+                    for light in &scene.lights {
+                        if let Some(q) = direct_light(&it, light) {
+                            out.counts.shadow += 1;
+                            out.shadows.push(ShadowItem {
+                                ray: q.ray,
+                                t_max: q.t_max,
+                                radiance: h.throughput * q.radiance,
+                                path: h.path,
+                            });
+                        }
+                    }
+                }
+                if SCATTER && h.depth < settings.max_depth {
+                    for s in scatter(&it).into_iter().flatten() {
+                        let t = h.throughput * s.weight;
+                        if max_component(t) < settings.min_contribution {
+                            continue;
+                        }
+                        match s.kind {
+                            RayKind::Reflection => out.counts.reflection += 1,
+                            RayKind::Refraction => out.counts.refraction += 1,
+                            RayKind::Camera => out.counts.camera += 1,
+                        }
+                        out.rays.push(RayItem {
+                            ray: s.ray,
+                            throughput: t,
+                            path: h.path,
+                            depth: h.depth + 1,
+                        });
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    for out in outputs {
+        for (path, l) in out.emitted {
+            radiance[path as usize] += l;
+        }
+        for i in 0..out.shadows.len() {
+            shadows.push(ShadowItem {
+                ray: out.shadows.ray(i),
+                t_max: out.shadows.t_max[i],
+                radiance: out.shadows.radiance[i],
+                path: out.shadows.path[i],
+            });
+        }
+        next.append(&out.rays);
+        rays.add(&out.counts);
+    }
+}
+
+/// Shades the hits of `class` with the kernel for that class.
+#[allow(clippy::too_many_arguments)]
+pub fn shade_class(
+    class: MaterialClass,
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    hits: &HitQueue,
+    radiance: &mut [Color],
+    shadows: &mut ShadowQueue,
+    next: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    match class {
+        MaterialClass::Emissive => {
+            shade::<false, false>(scene, settings, hits, radiance, shadows, next, rays)
+        }
+        MaterialClass::Diffuse => {
+            shade::<true, false>(scene, settings, hits, radiance, shadows, next, rays)
+        }
+        MaterialClass::Mirror | MaterialClass::Glass => {
+            shade::<false, true>(scene, settings, hits, radiance, shadows, next, rays)
+        }
+        MaterialClass::General => {
+            shade::<true, true>(scene, settings, hits, radiance, shadows, next, rays)
+        }
+    }
+}
+
+/// Stage: traces every shadow ray, stopping at the first blocker, and adds
+/// the radiance of the unblocked ones to their paths.
+pub fn trace_shadow_rays(
+    scene: &RenderScene,
+    shadows: &ShadowQueue,
+    scratch: &mut Vec<bool>,
+    radiance: &mut [Color],
+) {
+    scratch.clear();
+    scratch.resize(shadows.len(), false);
+    scratch
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let base = c * CHUNK;
+            for (i, visible) in out.iter_mut().enumerate() {
+                let j = base + i;
+                *visible = !scene.occluded(&shadows.ray(j), 0.0, shadows.t_max[j]);
+            }
+        });
+    for (j, &visible) in scratch.iter().enumerate() {
+        if visible {
+            radiance[shadows.path[j] as usize] += shadows.radiance[j];
+        }
+    }
+}
+
+/// Per-pixel sums over samples, across batches.
+#[derive(Clone, Debug, Default)]
+pub struct PixelSums {
+    /// Sum of finite samples per pixel.
+    pub sum: Vec<Color>,
+    /// Number of finite samples per pixel.
+    pub valid: Vec<u32>,
+}
+
+impl PixelSums {
+    /// Zeroed sums for `pixels` pixels.
+    pub fn new(pixels: usize) -> Self {
+        Self {
+            sum: vec![Color::ZERO; pixels],
+            valid: vec![0; pixels],
+        }
+    }
+
+    /// The averaged image.
+    pub fn resolve(&self, width: u32, height: u32) -> Film {
+        let mut film = Film::new(width, height);
+        for ((px, s), &n) in film.pixels.iter_mut().zip(&self.sum).zip(&self.valid) {
+            *px = if n > 0 { *s / n as f32 } else { Color::ZERO };
+        }
+        film
+    }
+}
+
+/// Stage: adds each finished path of the batch to its pixel, in path
+/// order (so samples are summed in the same order as the recursive
+/// tracer sums them), dropping and counting non-finite samples.
+pub fn update_film(
+    radiance: &[Color],
+    first: u64,
+    spp: u32,
+    sums: &mut PixelSums,
+    counters: &mut RenderCounters,
+) {
+    for (local, &l) in radiance.iter().enumerate() {
+        let pixel = ((first + local as u64) / spp as u64) as usize;
+        accumulate(&mut sums.sum[pixel], &mut sums.valid[pixel], l, counters);
+    }
+}
+
+/// Everything the wavefront reports beyond the image.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WavefrontReport {
+    /// Rays and dropped samples.
+    pub counters: RenderCounters,
+    /// Time per stage.
+    pub stages: StageSeconds,
+    /// Largest total of bytes held by all queues at once.
+    pub peak_queue_bytes: usize,
+    /// Number of batches.
+    pub batches: usize,
+}

@@ -1,0 +1,415 @@
+//! Structure-of-arrays work queues for the wavefront integrator.
+//!
+//! A queue holds one `Vec` per field of its item; it only knows how to
+//! push, read back and clear. Which queue an item goes to is decided by the
+//! integrator's stages, never here. Pushes assert (in debug builds) that no
+//! NaN or infinity enters a queue.
+
+use glam::{Vec2, Vec3A};
+
+use crate::math::{Color, Ray};
+
+/// Memory held by a queue's buffers, in bytes (capacity, not length).
+pub trait QueueBytes {
+    /// Bytes allocated.
+    fn bytes(&self) -> usize;
+}
+
+fn vec_bytes<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
+}
+
+/// A ray waiting to be traced, with the path it belongs to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayItem {
+    /// The ray (origin already offset from the surface it leaves).
+    pub ray: Ray,
+    /// Weight of the radiance it brings back, relative to the pixel sample.
+    pub throughput: Color,
+    /// Index of the path (pixel sample) within the batch.
+    pub path: u32,
+    /// Bounces so far (0 for camera rays).
+    pub depth: u32,
+}
+
+/// Rays to trace, by field.
+#[derive(Clone, Debug, Default)]
+pub struct RayQueue {
+    /// Origins.
+    pub origin: Vec<Vec3A>,
+    /// Directions (unit).
+    pub direction: Vec<Vec3A>,
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices within the batch.
+    pub path: Vec<u32>,
+    /// Bounce depths.
+    pub depth: Vec<u32>,
+}
+
+impl RayQueue {
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.path.len()
+    }
+
+    /// True when no ray is queued.
+    pub fn is_empty(&self) -> bool {
+        self.path.is_empty()
+    }
+
+    /// Removes every ray, keeping the allocation.
+    pub fn clear(&mut self) {
+        self.origin.clear();
+        self.direction.clear();
+        self.throughput.clear();
+        self.path.clear();
+        self.depth.clear();
+    }
+
+    /// Appends a ray.
+    #[inline]
+    pub fn push(&mut self, item: RayItem) {
+        debug_assert!(
+            item.ray.origin.is_finite() && item.ray.direction.is_finite(),
+            "non-finite ray pushed: {item:?}"
+        );
+        debug_assert!(
+            item.throughput.is_finite(),
+            "non-finite throughput: {item:?}"
+        );
+        self.origin.push(item.ray.origin);
+        self.direction.push(item.ray.direction);
+        self.throughput.push(item.throughput);
+        self.path.push(item.path);
+        self.depth.push(item.depth);
+    }
+
+    /// Appends every ray of `other`, in order.
+    pub fn append(&mut self, other: &RayQueue) {
+        self.origin.extend_from_slice(&other.origin);
+        self.direction.extend_from_slice(&other.direction);
+        self.throughput.extend_from_slice(&other.throughput);
+        self.path.extend_from_slice(&other.path);
+        self.depth.extend_from_slice(&other.depth);
+    }
+
+    /// The ray at `i`.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray::new(self.origin[i], self.direction[i])
+    }
+
+    /// The item at `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> RayItem {
+        RayItem {
+            ray: self.ray(i),
+            throughput: self.throughput[i],
+            path: self.path[i],
+            depth: self.depth[i],
+        }
+    }
+}
+
+impl QueueBytes for RayQueue {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.origin)
+            + vec_bytes(&self.direction)
+            + vec_bytes(&self.throughput)
+            + vec_bytes(&self.path)
+            + vec_bytes(&self.depth)
+    }
+}
+
+/// A surface hit waiting to be shaded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HitItem {
+    /// Direction of the ray that found the hit.
+    pub direction: Vec3A,
+    /// World-space hit point.
+    pub point: Vec3A,
+    /// Unit geometric normal (as the geometry defines it).
+    pub geometric_normal: Vec3A,
+    /// Unit shading normal.
+    pub shading_normal: Vec3A,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Material index.
+    pub material: u32,
+    /// Path throughput.
+    pub throughput: Color,
+    /// Path index.
+    pub path: u32,
+    /// Bounce depth of the ray that hit.
+    pub depth: u32,
+}
+
+/// Hits of one material class, by field.
+#[derive(Clone, Debug, Default)]
+pub struct HitQueue {
+    /// Ray directions.
+    pub direction: Vec<Vec3A>,
+    /// Hit points.
+    pub point: Vec<Vec3A>,
+    /// Geometric normals.
+    pub geometric_normal: Vec<Vec3A>,
+    /// Shading normals.
+    pub shading_normal: Vec<Vec3A>,
+    /// Texture coordinates.
+    pub uv: Vec<Vec2>,
+    /// Material indices.
+    pub material: Vec<u32>,
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+    /// Bounce depths.
+    pub depth: Vec<u32>,
+}
+
+impl HitQueue {
+    /// Number of hits.
+    pub fn len(&self) -> usize {
+        self.path.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.path.is_empty()
+    }
+
+    /// Removes every hit, keeping the allocation.
+    pub fn clear(&mut self) {
+        self.direction.clear();
+        self.point.clear();
+        self.geometric_normal.clear();
+        self.shading_normal.clear();
+        self.uv.clear();
+        self.material.clear();
+        self.throughput.clear();
+        self.path.clear();
+        self.depth.clear();
+    }
+
+    /// Appends a hit.
+    #[inline]
+    pub fn push(&mut self, item: HitItem) {
+        debug_assert!(
+            item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
+            "non-finite hit pushed: {item:?}"
+        );
+        self.direction.push(item.direction);
+        self.point.push(item.point);
+        self.geometric_normal.push(item.geometric_normal);
+        self.shading_normal.push(item.shading_normal);
+        self.uv.push(item.uv);
+        self.material.push(item.material);
+        self.throughput.push(item.throughput);
+        self.path.push(item.path);
+        self.depth.push(item.depth);
+    }
+
+    /// The hit at `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> HitItem {
+        HitItem {
+            direction: self.direction[i],
+            point: self.point[i],
+            geometric_normal: self.geometric_normal[i],
+            shading_normal: self.shading_normal[i],
+            uv: self.uv[i],
+            material: self.material[i],
+            throughput: self.throughput[i],
+            path: self.path[i],
+            depth: self.depth[i],
+        }
+    }
+}
+
+impl QueueBytes for HitQueue {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.direction)
+            + vec_bytes(&self.point)
+            + vec_bytes(&self.geometric_normal)
+            + vec_bytes(&self.shading_normal)
+            + vec_bytes(&self.uv)
+            + vec_bytes(&self.material)
+            + vec_bytes(&self.throughput)
+            + vec_bytes(&self.path)
+            + vec_bytes(&self.depth)
+    }
+}
+
+/// Rays that left the scene: they bring back the background.
+#[derive(Clone, Debug, Default)]
+pub struct EscapedQueue {
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+}
+
+impl EscapedQueue {
+    /// Number of escaped rays.
+    pub fn len(&self) -> usize {
+        self.path.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.path.is_empty()
+    }
+
+    /// Removes everything.
+    pub fn clear(&mut self) {
+        self.throughput.clear();
+        self.path.clear();
+    }
+
+    /// Appends an escaped ray.
+    #[inline]
+    pub fn push(&mut self, path: u32, throughput: Color) {
+        debug_assert!(throughput.is_finite());
+        self.throughput.push(throughput);
+        self.path.push(path);
+    }
+}
+
+impl QueueBytes for EscapedQueue {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.throughput) + vec_bytes(&self.path)
+    }
+}
+
+/// A shadow ray and what it adds to its path if nothing blocks it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowItem {
+    /// The ray towards the light.
+    pub ray: Ray,
+    /// Far end of the segment (the light's distance, or infinity).
+    pub t_max: f32,
+    /// Radiance added to the path if visible, throughput included.
+    pub radiance: Color,
+    /// Path index.
+    pub path: u32,
+}
+
+/// Shadow rays, by field.
+#[derive(Clone, Debug, Default)]
+pub struct ShadowQueue {
+    /// Origins.
+    pub origin: Vec<Vec3A>,
+    /// Directions.
+    pub direction: Vec<Vec3A>,
+    /// Segment ends.
+    pub t_max: Vec<f32>,
+    /// Radiance if unoccluded.
+    pub radiance: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+}
+
+impl ShadowQueue {
+    /// Number of shadow rays.
+    pub fn len(&self) -> usize {
+        self.path.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.path.is_empty()
+    }
+
+    /// Removes everything.
+    pub fn clear(&mut self) {
+        self.origin.clear();
+        self.direction.clear();
+        self.t_max.clear();
+        self.radiance.clear();
+        self.path.clear();
+    }
+
+    /// Appends a shadow ray.
+    #[inline]
+    pub fn push(&mut self, item: ShadowItem) {
+        debug_assert!(
+            item.ray.origin.is_finite() && item.ray.direction.is_finite(),
+            "non-finite shadow ray: {item:?}"
+        );
+        debug_assert!(!item.t_max.is_nan(), "NaN shadow extent: {item:?}");
+        self.origin.push(item.ray.origin);
+        self.direction.push(item.ray.direction);
+        self.t_max.push(item.t_max);
+        self.radiance.push(item.radiance);
+        self.path.push(item.path);
+    }
+
+    /// The ray at `i`.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray::new(self.origin[i], self.direction[i])
+    }
+}
+
+impl QueueBytes for ShadowQueue {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.origin)
+            + vec_bytes(&self.direction)
+            + vec_bytes(&self.t_max)
+            + vec_bytes(&self.radiance)
+            + vec_bytes(&self.path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn queues_round_trip_and_clear() {
+        let mut q = RayQueue::default();
+        let item = RayItem {
+            ray: Ray::new(Vec3A::new(1.0, 2.0, 3.0), Vec3A::X),
+            throughput: Color::new(0.5, 0.25, 1.0),
+            path: 7,
+            depth: 2,
+        };
+        q.push(item);
+        q.push(RayItem { path: 8, ..item });
+        assert_eq!(q.len(), 2);
+        assert_eq!(q.get(0), item);
+        assert_eq!(q.get(1).path, 8);
+        let bytes = q.bytes();
+        assert!(bytes >= 2 * (16 + 16 + 12 + 4 + 4));
+        q.clear();
+        assert!(q.is_empty());
+        assert_eq!(q.bytes(), bytes, "clearing keeps the allocation");
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "non-finite")]
+    fn nan_cannot_enter_a_ray_queue() {
+        let mut q = RayQueue::default();
+        q.push(RayItem {
+            ray: Ray::new(Vec3A::new(f32::NAN, 0.0, 0.0), Vec3A::X),
+            throughput: Color::ONE,
+            path: 0,
+            depth: 0,
+        });
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "non-finite")]
+    fn nan_cannot_enter_a_shadow_queue() {
+        let mut q = ShadowQueue::default();
+        q.push(ShadowItem {
+            ray: Ray::new(Vec3A::ZERO, Vec3A::new(0.0, f32::INFINITY, 0.0)),
+            t_max: 1.0,
+            radiance: Color::ONE,
+            path: 0,
+        });
+    }
+}
