@@ -31,6 +31,8 @@ pub mod math;
 pub mod mesh;
 pub mod optics;
 pub mod output;
+pub mod packet;
+pub mod procedural;
 pub mod queues;
 pub mod rng;
 pub mod scene;

@@ -3,10 +3,12 @@
 
 use std::time::Instant;
 
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{BVec3A, UVec2, Vec2, Vec3, Vec3A};
+use obvhs::cwbvh::node::{CwBvhNode, extract_byte64};
 use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh};
 
 use crate::math::Ray;
+use crate::packet::{LANES, LaneMask, Packet, for_each_lane};
 
 /// How a mesh's shading normal is chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -82,6 +84,7 @@ pub struct MeshSurface {
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
     origin: Vec3A,
+    direction: Vec3A,
     k: [usize; 3],
     shear: Vec3A,
 }
@@ -106,16 +109,31 @@ impl WatertightRay {
         }
         Self {
             origin: ray.origin,
+            direction: d,
             k: [kx, ky, kz],
-            shear: Vec3A::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+            shear: Vec3A::new(d[kx] / d[kz], d[ky] / d[kz], 0.0),
         }
     }
 
     /// Intersects the triangle `(p0, p1, p2)`; returns `(t, b1, b2)` for a
-    /// hit with `t` in `(t_min, t_max)`. Hits on shared edges and vertices
-    /// are never lost: every edge function is evaluated identically for
-    /// the two triangles that share the edge, and exact zeros are
-    /// re-evaluated in double precision.
+    /// hit with `t` in `(t_min, t_max)`.
+    ///
+    /// Hits on shared edges and vertices are never lost: each edge function
+    /// depends only on the edge's two vertices and the ray, and is
+    /// evaluated identically (up to sign) by the two triangles sharing the
+    /// edge, so a ray near the edge is inside one of them.
+    ///
+    /// An edge function whose f32 value is within its rounding error bound
+    /// (`8 EPS` times the larger vertex coordinate relative to the origin
+    /// times the sum of the edge's sheared coordinates) is re-evaluated in
+    /// double precision from the vertex positions. The decision and the
+    /// re-evaluation use only that edge's data, which keeps the two
+    /// triangles consistent. This fixes rays in (or within rounding of) the
+    /// triangle's plane: the projected triangle is then a segment, every
+    /// edge function is rounding noise, and the f32 test could report a hit
+    /// where the ray is not even over the triangle (seen in
+    /// `tests/watertight.rs`). A ray whose three edge functions are all zero
+    /// within double precision rounding lies in the plane: no hit.
     #[inline]
     pub fn intersect(
         &self,
@@ -129,23 +147,35 @@ impl WatertightRay {
         let a = p0 - self.origin;
         let b = p1 - self.origin;
         let c = p2 - self.origin;
-        let (sx, sy, sz) = (self.shear.x, self.shear.y, self.shear.z);
+        let (sx, sy) = (self.shear.x, self.shear.y);
         let ax = a[kx] - sx * a[kz];
         let ay = a[ky] - sy * a[kz];
         let bx = b[kx] - sx * b[kz];
         let by = b[ky] - sy * b[kz];
         let cx = c[kx] - sx * c[kz];
         let cy = c[ky] - sy * c[kz];
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let (ax, ay, bx, by, cx, cy) = (
-                ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-            );
-            u = (cx * by - cy * bx) as f32;
-            v = (ax * cy - ay * cx) as f32;
-            w = (bx * ay - by * ax) as f32;
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        // Rounding error bounds, symmetric in the edge's two vertices.
+        let (ma, mb, mc) = (
+            a.abs().max_element(),
+            b.abs().max_element(),
+            c.abs().max_element(),
+        );
+        let (sa, sb, sc) = (
+            ax.abs() + ay.abs(),
+            bx.abs() + by.abs(),
+            cx.abs() + cy.abs(),
+        );
+        let tol = 8.0 * f32::EPSILON;
+        let bounds = [
+            tol * mb.max(mc) * (sb + sc),
+            tol * mc.max(ma) * (sc + sa),
+            tol * ma.max(mb) * (sa + sb),
+        ];
+        if !(u.abs() > bounds[0] && v.abs() > bounds[1] && w.abs() > bounds[2]) {
+            return self.intersect_careful([p0, p1, p2], [u, v, w], bounds, t_min, t_max);
         }
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
@@ -154,16 +184,92 @@ impl WatertightRay {
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let az = sz * a[kz];
-        let bz = sz * b[kz];
-        let cz = sz * c[kz];
-        let t_scaled = u * az + v * bz + w * cz;
-        let inv = 1.0 / det;
-        let t = t_scaled * inv;
+        let t = self.plane_t(p0, p1, p2);
         if !(t > t_min && t < t_max) {
             return None;
         }
+        let inv = 1.0 / det;
         Some((t, v * inv, w * inv))
+    }
+
+    /// Ray parameter of the crossing with the triangle's plane, in double
+    /// precision: `n.(p0 - o) / n.d` with `n = (p1 - p0) x (p2 - p0)`.
+    ///
+    /// The usual interpolation `(u z0 + v z1 + w z2) / det` inherits the
+    /// barycentrics' rounding, which grows with the triangle's aspect ratio
+    /// times the distance of the origin: a 1:500 sliver seen from 80 units
+    /// away was hit 4.5e-4 off its plane (`tests/watertight.rs`), enough
+    /// for secondary rays to self-intersect. In f64 the differences of f32
+    /// coordinates and their products are exact, so `t` is correct to f32
+    /// rounding for any triangle. Only called for hits.
+    #[inline]
+    fn plane_t(&self, p0: Vec3A, p1: Vec3A, p2: Vec3A) -> f32 {
+        let p0 = p0.as_dvec3();
+        let n = (p1.as_dvec3() - p0).cross(p2.as_dvec3() - p0);
+        (n.dot(p0 - self.origin.as_dvec3()) / n.dot(self.direction.as_dvec3())) as f32
+    }
+
+    /// [`Self::intersect`] when some edge function is within its f32
+    /// rounding error: those edges are re-evaluated in double precision
+    /// (the others keep their f32 values, exactly as the neighbouring
+    /// triangles see them).
+    #[cold]
+    #[inline(never)]
+    fn intersect_careful(
+        &self,
+        p: [Vec3A; 3],
+        edges32: [f32; 3],
+        bounds: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.k;
+        let o = self.origin.as_dvec3();
+        let d = self.direction.as_dvec3();
+        let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
+        // Sheared coordinates and magnitudes in f64. Differences of f32
+        // values are exact in f64 (unless their exponents are more than 29
+        // apart).
+        let q = p.map(|v| {
+            let r = v.as_dvec3() - o;
+            let (x, y) = (r[kx] - sx * r[kz], r[ky] - sy * r[kz]);
+            (x, y, r.abs().max_element(), x.abs() + y.abs())
+        });
+        // Edge k joins vertices (k+1, k+2): u = edge(b, c), v = edge(c, a),
+        // w = edge(a, b), with edge(p, q) = q.x p.y - q.y p.x.
+        let mut e = [0.0f64; 3];
+        let mut all_zero = true;
+        for k in 0..3 {
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            if edges32[k].abs() > bounds[k] {
+                e[k] = edges32[k] as f64;
+                all_zero = false;
+            } else {
+                let (pi, pj) = (q[i], q[j]);
+                e[k] = pj.0 * pi.1 - pj.1 * pi.0;
+                let noise = 8.0 * f64::EPSILON * pi.2.max(pj.2) * (pi.3 + pj.3);
+                if !(e[k].abs() <= noise) {
+                    all_zero = false;
+                }
+            }
+        }
+        if all_zero {
+            // The ray lies in the triangle's plane (or the input is not finite).
+            return None;
+        }
+        let [u, v, w] = e;
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let t = self.plane_t(p[0], p[1], p[2]);
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        Some((t, (v / det) as f32, (w / det) as f32))
     }
 }
 
@@ -219,6 +325,146 @@ pub const MAX_COORDINATE: f32 = 1.0e15;
 #[inline]
 pub(crate) fn obvhs_ray(ray: &Ray, t_min: f32, t_max: f32) -> obvhs::ray::Ray {
     obvhs::ray::Ray::new(ray.origin, ray.direction + Vec3A::ZERO, t_min, t_max)
+}
+
+/// A ray prepared for conservative box tests against CwBvh nodes.
+#[derive(Clone, Copy, Debug)]
+struct BoxRay {
+    origin: Vec3A,
+    inv_dir: Vec3A,
+    /// Axes along which the ray does not move (or whose reciprocal
+    /// overflows): the slab test becomes an inside/outside test.
+    parallel: BVec3A,
+    any_parallel: bool,
+    /// Largest coordinate magnitude of the origin.
+    origin_mag: f32,
+}
+
+impl BoxRay {
+    #[inline]
+    fn new(ray: &Ray) -> Self {
+        let inv_dir = Vec3A::ONE / ray.direction;
+        let parallel = !inv_dir.abs().cmplt(Vec3A::INFINITY);
+        Self {
+            origin: ray.origin,
+            inv_dir,
+            parallel,
+            any_parallel: parallel.any(),
+            origin_mag: ray.origin.abs().max_element(),
+        }
+    }
+}
+
+/// Rounding margin of the node test, in units of `f32::EPSILON` times the
+/// larger coordinate magnitude of the ray origin and the node.
+///
+/// The watertight triangle test accepts a ray when its *rounded* sheared
+/// coordinates put it inside the triangle. Those coordinates are
+/// differences `vertex - origin` followed by a shear, which carry about
+/// 2 EPS (|vertex| + |origin|) of absolute error, so an accepted ray may
+/// pass outside the exact triangle, and outside its exact box, by that
+/// much. This matters at shared edges and vertices: the consistent edge
+/// functions give the ray to exactly one of the neighbours, and if that
+/// neighbour's box were culled the ray would pass through the mesh. Boxes
+/// are therefore grown by 16 EPS (|origin| + |node|) per axis, which also
+/// covers the rounding of the slab computation itself and of the
+/// quantised child boxes. (obvhs's own node test pads nothing, ignores
+/// `tmin` and rejects every box closer than `t = 1e-4`, a scene-scale
+/// epsilon; both made rays leak through closed meshes.)
+const NODE_MARGIN_EPS: f32 = 16.0;
+
+/// Conservative ray-box test of the eight children of a CwBvh node;
+/// returns the hit mask in obvhs's encoding.
+#[inline]
+fn intersect_node(node: &CwBvhNode, ray: &BoxRay, t_min: f32, t_max: f32, oct_inv4: u32) -> u32 {
+    let extent = node.compute_extent();
+    let p = Vec3A::from(node.p);
+    let node_mag = p.abs().max((p + extent * 255.0).abs()).max_element();
+    let margin = Vec3A::splat(NODE_MARGIN_EPS * f32::EPSILON * (ray.origin_mag + node_mag));
+    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+    let mut hit_mask = 0;
+    for child in 0..8 {
+        let child_bits = extract_byte64(child_bits8, child);
+        if child_bits == 0 {
+            continue;
+        }
+        let q_lo = Vec3A::new(
+            node.child_min_x[child] as f32,
+            node.child_min_y[child] as f32,
+            node.child_min_z[child] as f32,
+        );
+        let q_hi = Vec3A::new(
+            node.child_max_x[child] as f32,
+            node.child_max_y[child] as f32,
+            node.child_max_z[child] as f32,
+        );
+        let lo = q_lo * extent + p - margin;
+        let hi = q_hi * extent + p + margin;
+        let ta = (lo - ray.origin) * ray.inv_dir;
+        let tb = (hi - ray.origin) * ray.inv_dir;
+        let mut near = ta.min(tb);
+        let mut far = ta.max(tb);
+        if ray.any_parallel {
+            let inside = lo.cmple(ray.origin) & ray.origin.cmple(hi);
+            let (open_near, open_far) = (
+                Vec3A::select(inside, Vec3A::NEG_INFINITY, Vec3A::INFINITY),
+                Vec3A::select(inside, Vec3A::INFINITY, Vec3A::NEG_INFINITY),
+            );
+            near = Vec3A::select(ray.parallel, open_near, near);
+            far = Vec3A::select(ray.parallel, open_far, far);
+        }
+        // The products carry one rounding each: widen by a few ulps.
+        let enter = near.max_element();
+        let exit = far.min_element();
+        let enter = enter - enter.abs() * (4.0 * f32::EPSILON);
+        let exit = exit + exit.abs() * (4.0 * f32::EPSILON);
+        if enter.max(t_min) <= exit.min(t_max) {
+            hit_mask |= child_bits << extract_byte64(bit_index8, child);
+        }
+    }
+    hit_mask
+}
+
+/// Traverses `bvh` with a conservative node test (see [`NODE_MARGIN_EPS`]).
+///
+/// `visit(slot, t_max)` tests the primitive in leaf slot `slot` (an index
+/// into `bvh.primitive_indices`) and returns the `t` of a hit inside
+/// `(t_min, t_max)`, which then shrinks `t_max`. With `stop_at_first` the
+/// traversal ends at the first hit (shadow rays). Returns whether any
+/// primitive was hit.
+///
+/// Used for every mesh; the top-level BVH can use it the same way.
+pub fn traverse_bvh(
+    bvh: &CwBvh,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    stop_at_first: bool,
+    mut visit: impl FnMut(usize, f32) -> Option<f32>,
+) -> bool {
+    let box_ray = BoxRay::new(ray);
+    let mut t_max = t_max;
+    let mut any = false;
+    let mut state = bvh.new_traversal(ray.direction);
+    let mut node;
+    'traversal: {
+        obvhs::traverse!(
+            bvh,
+            node,
+            state,
+            intersect_node(node, &box_ray, t_min, t_max, state.oct_inv4),
+            {
+                if let Some(t) = visit(state.primitive_id as usize, t_max) {
+                    any = true;
+                    if stop_at_first {
+                        break 'traversal;
+                    }
+                    t_max = t_max.min(t);
+                }
+            }
+        );
+    }
+    any
 }
 
 /// Builds a CwBvh over boxes; the BVH's own `primitive_indices` map leaf
@@ -360,24 +606,70 @@ impl Mesh {
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit> {
         let wt = WatertightRay::new(ray);
         let mut best: Option<MeshHit> = None;
-        let mut hit = obvhs::ray::RayHit::none();
-        self.bvh
-            .ray_traverse(obvhs_ray(ray, t_min, t_max), &mut hit, |r, id| {
-                let [p0, p1, p2] = self.corners[id];
-                match wt.intersect(p0, p1, p2, r.tmin, r.tmax) {
-                    Some((t, b1, b2)) => {
-                        best = Some(MeshHit {
+        traverse_bvh(&self.bvh, ray, t_min, t_max, false, |id, t_max| {
+            let [p0, p1, p2] = self.corners[id];
+            let (t, b1, b2) = wt.intersect(p0, p1, p2, t_min, t_max)?;
+            best = Some(MeshHit {
+                t,
+                triangle: id as u32,
+                b1,
+                b2,
+            });
+            Some(t)
+        });
+        best
+    }
+
+    /// Closest hits for the lanes of `packet` in `lanes` (rays in object
+    /// space), by packet traversal: `best[l]` is replaced when lane `l`
+    /// finds a nearer hit than `packet.t_max[l]`, which is shrunk to it.
+    pub fn intersect_packet(
+        &self,
+        packet: &mut Packet,
+        lanes: LaneMask,
+        best: &mut [Option<MeshHit>; LANES],
+    ) {
+        let mut wt = [None; LANES];
+        for_each_lane(lanes, |l| wt[l] = Some(WatertightRay::new(&packet.rays[l])));
+        crate::packet::traverse(&self.bvh, packet, lanes, |p, hit, slot| {
+            let [p0, p1, p2] = self.corners[slot];
+            for_each_lane(hit, |l| {
+                if let Some(w) = &wt[l] {
+                    if let Some((t, b1, b2)) = w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]) {
+                        p.t_max[l] = t;
+                        best[l] = Some(MeshHit {
                             t,
-                            triangle: id as u32,
+                            triangle: slot as u32,
                             b1,
                             b2,
                         });
-                        t
                     }
-                    None => f32::INFINITY,
                 }
             });
-        best
+            0
+        });
+    }
+
+    /// The lanes of `packet` in `lanes` that hit any triangle within their
+    /// intervals; each lane stops at its first blocker.
+    pub fn occluded_packet(&self, packet: &mut Packet, lanes: LaneMask) -> LaneMask {
+        let mut wt = [None; LANES];
+        for_each_lane(lanes, |l| wt[l] = Some(WatertightRay::new(&packet.rays[l])));
+        let mut blocked = 0;
+        crate::packet::traverse(&self.bvh, packet, lanes, |p, hit, slot| {
+            let [p0, p1, p2] = self.corners[slot];
+            let mut now = 0;
+            for_each_lane(hit, |l| {
+                if let Some(w) = &wt[l] {
+                    if w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]).is_some() {
+                        now |= 1 << l;
+                    }
+                }
+            });
+            blocked |= now;
+            now
+        });
+        blocked
     }
 
     /// Closest hit by testing every triangle: the reference for BVH tests.
@@ -403,13 +695,10 @@ impl Mesh {
     /// the first one found.
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         let wt = WatertightRay::new(ray);
-        !self
-            .bvh
-            .ray_traverse_miss(obvhs_ray(ray, t_min, t_max), |r, id| {
-                let [p0, p1, p2] = self.corners[id];
-                wt.intersect(p0, p1, p2, r.tmin, r.tmax)
-                    .map_or(f32::INFINITY, |h| h.0)
-            })
+        traverse_bvh(&self.bvh, ray, t_min, t_max, true, |id, t_max| {
+            let [p0, p1, p2] = self.corners[id];
+            wt.intersect(p0, p1, p2, t_min, t_max).map(|h| h.0)
+        })
     }
 
     /// Normals and texture coordinates at a hit.

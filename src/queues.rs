@@ -210,6 +210,20 @@ impl HitQueue {
         self.depth.push(item.depth);
     }
 
+    /// Appends every hit of `other`, in order.
+    pub fn append(&mut self, other: &HitQueue) {
+        self.direction.extend_from_slice(&other.direction);
+        self.point.extend_from_slice(&other.point);
+        self.geometric_normal
+            .extend_from_slice(&other.geometric_normal);
+        self.shading_normal.extend_from_slice(&other.shading_normal);
+        self.uv.extend_from_slice(&other.uv);
+        self.material.extend_from_slice(&other.material);
+        self.throughput.extend_from_slice(&other.throughput);
+        self.path.extend_from_slice(&other.path);
+        self.depth.extend_from_slice(&other.depth);
+    }
+
     /// The hit at `i`.
     #[inline]
     pub fn get(&self, i: usize) -> HitItem {
@@ -274,6 +288,12 @@ impl EscapedQueue {
         self.throughput.push(throughput);
         self.path.push(path);
     }
+
+    /// Appends every ray of `other`, in order.
+    pub fn append(&mut self, other: &EscapedQueue) {
+        self.throughput.extend_from_slice(&other.throughput);
+        self.path.extend_from_slice(&other.path);
+    }
 }
 
 impl QueueBytes for EscapedQueue {
@@ -293,6 +313,8 @@ pub struct ShadowItem {
     pub radiance: Color,
     /// Path index.
     pub path: u32,
+    /// Index of the light the ray goes to (used to group coherent rays).
+    pub light: u32,
 }
 
 /// Shadow rays, by field.
@@ -308,6 +330,8 @@ pub struct ShadowQueue {
     pub radiance: Vec<Color>,
     /// Path indices.
     pub path: Vec<u32>,
+    /// Light indices.
+    pub light: Vec<u32>,
 }
 
 impl ShadowQueue {
@@ -328,6 +352,7 @@ impl ShadowQueue {
         self.t_max.clear();
         self.radiance.clear();
         self.path.clear();
+        self.light.clear();
     }
 
     /// Appends a shadow ray.
@@ -343,12 +368,23 @@ impl ShadowQueue {
         self.t_max.push(item.t_max);
         self.radiance.push(item.radiance);
         self.path.push(item.path);
+        self.light.push(item.light);
     }
 
     /// The ray at `i`.
     #[inline]
     pub fn ray(&self, i: usize) -> Ray {
         Ray::new(self.origin[i], self.direction[i])
+    }
+
+    /// Appends every shadow ray of `other`, in order.
+    pub fn append(&mut self, other: &ShadowQueue) {
+        self.origin.extend_from_slice(&other.origin);
+        self.direction.extend_from_slice(&other.direction);
+        self.t_max.extend_from_slice(&other.t_max);
+        self.radiance.extend_from_slice(&other.radiance);
+        self.path.extend_from_slice(&other.path);
+        self.light.extend_from_slice(&other.light);
     }
 }
 
@@ -359,6 +395,7 @@ impl QueueBytes for ShadowQueue {
             + vec_bytes(&self.t_max)
             + vec_bytes(&self.radiance)
             + vec_bytes(&self.path)
+            + vec_bytes(&self.light)
     }
 }
 
@@ -410,6 +447,7 @@ mod tests {
             t_max: 1.0,
             radiance: Color::ONE,
             path: 0,
+            light: 0,
         });
     }
 }

@@ -12,6 +12,7 @@ use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
 use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, build_bvh, obvhs_ray, padded_aabb};
+use crate::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
 use crate::shapes::Shape;
 use crate::transform::{InstanceTransform, Transform};
 
@@ -276,6 +277,106 @@ impl RenderScene {
                 f32::INFINITY
             }
         })
+    }
+
+    /// Closest hits of up to [`LANES`] rays at once (each searched in
+    /// `(0, inf)`), by packet traversal of the top-level BVH and of mesh
+    /// BVHs: the same hits as [`RenderScene::intersect`] on each ray.
+    pub fn intersect_packet(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let n = rays.len().min(LANES);
+        let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
+        let mut t_max = [f32::INFINITY; LANES];
+        for (l, ray) in rays[..n].iter().enumerate() {
+            for &i in &self.unbounded {
+                if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
+                    t_max[l] = t;
+                    best[l] = Some((t, i, h));
+                }
+            }
+        }
+        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
+        packet::traverse(&self.tlas, &mut packet, ALL_LANES, |p, lanes, slot| {
+            let index = self.tlas_instances[slot];
+            let inst = &self.instances[index as usize];
+            match &inst.geometry {
+                InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
+                    let local = to_object(inst, &p.rays[l]);
+                    if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
+                        p.t_max[l] = h.t;
+                        best[l] = Some((
+                            h.t,
+                            index,
+                            LocalHit::Shape {
+                                normal: h.normal,
+                                uv: h.uv,
+                            },
+                        ));
+                    }
+                }),
+                InstanceGeometry::Mesh(m) => {
+                    let mut local = Packet::new(&[], &[], &[]);
+                    for_each_lane(lanes, |l| {
+                        local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                    });
+                    let mut hits = [None; LANES];
+                    m.intersect_packet(&mut local, lanes, &mut hits);
+                    for_each_lane(lanes, |l| {
+                        if let Some(h) = hits[l] {
+                            p.t_max[l] = h.t;
+                            best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                        }
+                    });
+                }
+            }
+            0
+        });
+        for (l, o) in out[..n].iter_mut().enumerate() {
+            *o = best[l].map(|(t, i, h)| self.finish_hit(&rays[l], t, i, h));
+        }
+    }
+
+    /// For up to [`LANES`] segments `(0, t_max[l])` along `rays`, the mask
+    /// of those blocked by anything: the same answers as
+    /// [`RenderScene::occluded`] on each.
+    pub fn occluded_packet(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+        let n = rays.len().min(LANES);
+        let mut blocked: LaneMask = 0;
+        for (l, ray) in rays[..n].iter().enumerate() {
+            if self
+                .unbounded
+                .iter()
+                .any(|&i| self.occludes_instance(i, ray, 0.0, t_max[l]))
+            {
+                blocked |= 1 << l;
+            }
+        }
+        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
+        let todo = ALL_LANES & !blocked;
+        packet::traverse(&self.tlas, &mut packet, todo, |p, lanes, slot| {
+            let inst = &self.instances[self.tlas_instances[slot] as usize];
+            let now = match &inst.geometry {
+                InstanceGeometry::Shape(s) => {
+                    let mut now = 0;
+                    for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                            now |= 1 << l;
+                        }
+                    });
+                    now
+                }
+                InstanceGeometry::Mesh(m) => {
+                    let mut local = Packet::new(&[], &[], &[]);
+                    for_each_lane(lanes, |l| {
+                        local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                    });
+                    m.occluded_packet(&mut local, lanes)
+                }
+            };
+            blocked |= now;
+            now
+        });
+        blocked & packet.valid
     }
 
     /// The closest hit found by testing every instance, and every triangle

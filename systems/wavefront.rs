@@ -21,12 +21,13 @@ use bevy_ecs::schedule::ScheduleLabel;
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::camera::CameraRays;
 use crate::integrator::wavefront::{
-    self as kernels, ClassQueues, PixelSums, StageSeconds, WavefrontReport,
+    self as kernels, ClassQueues, PixelSums, RoutingScratch, ShadeScratch, ShadowScratch,
+    StageSeconds, WavefrontReport,
 };
 use crate::material::MaterialClass;
 use crate::math::Color;
 use crate::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowQueue};
-use crate::scene::{Hit, RenderScene};
+use crate::scene::RenderScene;
 
 /// Schedule run once at the start of each batch.
 #[derive(ScheduleLabel, Debug, Clone, PartialEq, Eq, Hash)]
@@ -86,8 +87,9 @@ pub struct PixelAccumulator(pub PixelSums);
 /// Reusable per-ray scratch buffers of the intersection stages.
 #[derive(Resource, Default)]
 pub struct StageScratch {
-    hits: Vec<Option<Hit>>,
-    visible: Vec<bool>,
+    routing: RoutingScratch,
+    shading: ShadeScratch,
+    shadows: ShadowScratch,
 }
 
 /// What stays fixed during a frame: the scene, the camera rays, the
@@ -231,7 +233,7 @@ pub fn intersect_closest(
             &frame.scene,
             &frame.classes,
             &rays.0,
-            &mut scratch.hits,
+            &mut scratch.routing,
             &mut escaped.0,
             &mut hits.0,
         )
@@ -257,6 +259,7 @@ pub fn shade_class_system<const C: u8>(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut hits: ResMut<HitQueues>,
+    mut scratch: ResMut<StageScratch>,
     mut radiance: ResMut<PathRadiance>,
     mut shadows: ResMut<ShadowRays>,
     mut next: ResMut<NextRays>,
@@ -271,6 +274,7 @@ pub fn shade_class_system<const C: u8>(
             &frame.scene,
             &config.settings,
             queue,
+            &mut scratch.shading,
             &mut radiance.0,
             &mut shadows.0,
             &mut next.0,
@@ -292,7 +296,7 @@ pub fn trace_shadow_rays(
         kernels::trace_shadow_rays(
             &frame.scene,
             &shadows.0,
-            &mut scratch.visible,
+            &mut scratch.shadows,
             &mut radiance.0,
         );
         shadows.0.clear();
@@ -316,8 +320,13 @@ pub fn advance_bounce(
         + escaped.0.bytes()
         + hits.0.bytes()
         + shadows.0.bytes()
-        + scratch.hits.capacity() * std::mem::size_of::<Option<Hit>>()
-        + scratch.visible.capacity()
+        + scratch
+            .routing
+            .iter()
+            .map(|(e, h)| e.bytes() + h.bytes())
+            .sum::<usize>()
+        + scratch.shadows.bytes()
+        + scratch.shading.iter().map(|s| s.bytes()).sum::<usize>()
         + radiance.0.capacity() * std::mem::size_of::<Color>();
     stats.0.peak_queue_bytes = stats.0.peak_queue_bytes.max(bytes);
     std::mem::swap(&mut rays.0, &mut next.0);

@@ -286,3 +286,56 @@ fn empty_and_degenerate_scenes() {
     let ray = Ray::new(Vec3A::new(1.0, 1.0, 0.0), -Vec3A::Y);
     assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_none());
 }
+
+/// Packet traversal must find exactly what single-ray traversal finds,
+/// for coherent packets (shared origin, nearby directions) and for
+/// incoherent ones, including partly filled packets.
+#[test]
+fn packets_equal_single_rays() {
+    use prism::packet::LANES;
+    let mut rng = Rng::new(99);
+    let scene = random_scene(&mut rng, true);
+    let mut checked = 0;
+    let mut hits = 0;
+    for k in 0..3000 {
+        let n = 1 + k % LANES;
+        let rays: Vec<Ray> = if k % 2 == 0 {
+            let o = rng.dir() * 14.0;
+            let aim = (rng.vec(-5.0, 5.0) - o).normalize();
+            (0..n)
+                .map(|_| Ray::new(o.into(), (aim + rng.vec(-0.05, 0.05)).normalize().into()))
+                .collect()
+        } else {
+            (0..n)
+                .map(|_| Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()))
+                .collect()
+        };
+        let mut out = [None; LANES];
+        scene.intersect_packet(&rays, &mut out);
+        let t_max: Vec<f32> = (0..n).map(|_| rng.range(0.5, 30.0)).collect();
+        let blocked = scene.occluded_packet(&rays, &t_max);
+        assert_eq!(blocked >> n, 0, "unused lanes are never blocked");
+        for (l, ray) in rays.iter().enumerate() {
+            let single = scene.intersect(ray, 0.0, f32::INFINITY);
+            match (out[l], single) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert_eq!(a.t, b.t, "packet {k} lane {l}");
+                    assert_eq!(a.instance, b.instance, "packet {k} lane {l}");
+                }
+                (a, b) => panic!("packet {k} lane {l}: packet {a:?} single {b:?}"),
+            }
+            assert_eq!(
+                (blocked >> l) & 1 == 1,
+                scene.occluded(ray, 0.0, t_max[l]),
+                "shadow packet {k} lane {l}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        checked > 10_000 && hits > 4000,
+        "{checked} rays, {hits} hits"
+    );
+}

@@ -22,12 +22,17 @@ use super::{RenderSettings, accumulate, film_sample};
 use crate::camera::CameraRays;
 use crate::film::Film;
 use crate::material::MaterialClass;
+use crate::math::Ray;
 use crate::math::{Color, max_component};
+use crate::packet::LANES;
 use crate::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
 };
 use crate::rng::Sampler;
 use crate::scene::{Hit, RenderScene};
+
+/// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
+pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
 use crate::shading::{Interaction, RayKind, direct_light, scatter};
 use crate::stats::{RayCounts, RenderCounters};
 
@@ -131,45 +136,62 @@ pub fn generate_camera_rays(
 }
 
 /// Stage: closest hit for every ray of `rays`; misses go to `escaped`,
-/// hits to the queue of their material's class. `scratch` keeps the
-/// per-ray results between calls.
+/// hits to the queue of their material's class. Chunks are traced and
+/// routed in parallel into `scratch` queues, then appended in chunk order.
 pub fn intersect_closest(
     scene: &RenderScene,
     classes: &[MaterialClass],
     rays: &RayQueue,
-    scratch: &mut Vec<Option<Hit>>,
+    scratch: &mut RoutingScratch,
     escaped: &mut EscapedQueue,
     hits: &mut ClassQueues,
 ) {
-    scratch.clear();
-    scratch.resize(rays.len(), None);
-    scratch
-        .par_chunks_mut(CHUNK)
+    let chunks = rays.len().div_ceil(CHUNK);
+    if scratch.len() < chunks {
+        scratch.resize_with(chunks, Default::default);
+    }
+    scratch[..chunks]
+        .par_iter_mut()
         .enumerate()
-        .for_each(|(c, out)| {
-            let base = c * CHUNK;
-            for (i, slot) in out.iter_mut().enumerate() {
-                *slot = scene.intersect(&rays.ray(base + i), 0.0, f32::INFINITY);
+        .for_each(|(c, (esc, local))| {
+            esc.clear();
+            for q in &mut local.queues {
+                q.clear();
+            }
+            let end = ((c + 1) * CHUNK).min(rays.len());
+            let mut found = [None; LANES];
+            for i in c * CHUNK..end {
+                let lane = (i - c * CHUNK) % LANES;
+                if lane == 0 {
+                    // Consecutive rays are traced together as one packet.
+                    let n = (end - i).min(LANES);
+                    let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
+                    scene.intersect_packet(&packet[..n], &mut found);
+                }
+                let (path, throughput, depth) = (rays.path[i], rays.throughput[i], rays.depth[i]);
+                match found[lane] {
+                    None => esc.push(path, throughput),
+                    Some(h) => {
+                        let class = classes[h.material as usize];
+                        local.queues[class as usize].push(HitItem {
+                            direction: rays.direction[i],
+                            point: h.point,
+                            geometric_normal: h.geometric_normal,
+                            shading_normal: h.shading_normal,
+                            uv: h.uv,
+                            material: h.material,
+                            throughput,
+                            path,
+                            depth,
+                        });
+                    }
+                }
             }
         });
-    for (i, hit) in scratch.iter().enumerate() {
-        let (path, throughput, depth) = (rays.path[i], rays.throughput[i], rays.depth[i]);
-        match hit {
-            None => escaped.push(path, throughput),
-            Some(h) => {
-                let class = classes[h.material as usize];
-                hits.queues[class as usize].push(HitItem {
-                    direction: rays.direction[i],
-                    point: h.point,
-                    geometric_normal: h.geometric_normal,
-                    shading_normal: h.shading_normal,
-                    uv: h.uv,
-                    material: h.material,
-                    throughput,
-                    path,
-                    depth,
-                });
-            }
+    for (esc, local) in &scratch[..chunks] {
+        escaped.append(esc);
+        for (q, l) in hits.queues.iter_mut().zip(&local.queues) {
+            q.append(l);
         }
     }
 }
@@ -181,14 +203,40 @@ pub fn handle_escaped_rays(escaped: &EscapedQueue, background: Color, radiance: 
     }
 }
 
-/// What one chunk of a shading stage produced.
-#[derive(Default)]
-struct ShadeOutput {
+/// What one chunk of a shading stage produced; kept between calls so
+/// shading allocates nothing once the buffers have grown.
+#[derive(Default, Debug)]
+pub struct ShadeOutput {
+    interactions: Vec<(Interaction, HitItem)>,
     emitted: Vec<(u32, Color)>,
     shadows: ShadowQueue,
-    rays: RayQueue,
+    reflections: RayQueue,
+    refractions: RayQueue,
     counts: RayCounts,
 }
+
+impl ShadeOutput {
+    fn clear(&mut self) {
+        self.interactions.clear();
+        self.emitted.clear();
+        self.shadows.clear();
+        self.reflections.clear();
+        self.refractions.clear();
+        self.counts = RayCounts::default();
+    }
+
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.interactions.capacity() * std::mem::size_of::<(Interaction, HitItem)>()
+            + self.emitted.capacity() * std::mem::size_of::<(u32, Color)>()
+            + self.shadows.bytes()
+            + self.reflections.bytes()
+            + self.refractions.bytes()
+    }
+}
+
+/// Per-chunk buffers of the shading stages.
+pub type ShadeScratch = Vec<ShadeOutput>;
 
 /// Stage: shades every hit of one material class. Emission goes straight
 /// to the path's radiance; lit classes push one shadow ray per light that
@@ -196,21 +244,29 @@ struct ShadeOutput {
 /// above the contribution threshold, up to the maximum depth.
 ///
 /// `LIT` and `SCATTER` select the lobes the class has, so each class's
-/// kernel runs only the code it needs.
+/// kernel runs only the code it needs. Within a chunk, shadow rays are
+/// written light by light, and reflection rays before refraction rays, so
+/// that rays traced together next are alike.
 #[allow(clippy::too_many_arguments)]
 pub fn shade<const LIT: bool, const SCATTER: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
     hits: &HitQueue,
+    scratch: &mut ShadeScratch,
     radiance: &mut [Color],
     shadows: &mut ShadowQueue,
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    let outputs: Vec<ShadeOutput> = (0..hits.len().div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let mut out = ShadeOutput::default();
+    let chunks = hits.len().div_ceil(CHUNK);
+    if scratch.len() < chunks {
+        scratch.resize_with(chunks, Default::default);
+    }
+    scratch[..chunks]
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(c, out)| {
+            out.clear();
             let end = ((c + 1) * CHUNK).min(hits.len());
             for i in c * CHUNK..end {
                 let h = hits.get(i);
@@ -223,62 +279,72 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                     instance: 0,
                     material: h.material,
                 };
-                let ray = crate::math::Ray::new(h.point, h.direction);
-                let it = Interaction::new(scene, &ray, &hit);
+                let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &hit);
                 if it.surface.emission != Color::ZERO {
                     out.emitted
                         .push((h.path, h.throughput * it.surface.emission));
                 }
-                if LIT && it.is_lit_by_lights() {
-                    for light in &scene.lights {
-                        if let Some(q) = direct_light(&it, light) {
+                out.interactions.push((it, h));
+            }
+            if LIT {
+                for (k, light) in scene.lights.iter().enumerate() {
+                    for (it, h) in &out.interactions {
+                        if !it.is_lit_by_lights() {
+                            continue;
+                        }
+                        if let Some(q) = direct_light(it, light) {
                             out.counts.shadow += 1;
                             out.shadows.push(ShadowItem {
                                 ray: q.ray,
                                 t_max: q.t_max,
                                 radiance: h.throughput * q.radiance,
                                 path: h.path,
+                                light: k as u32,
                             });
                         }
                     }
                 }
-                if SCATTER && h.depth < settings.max_depth {
-                    for s in scatter(&it).into_iter().flatten() {
+            }
+            if SCATTER {
+                for (it, h) in &out.interactions {
+                    if h.depth >= settings.max_depth {
+                        continue;
+                    }
+                    for s in scatter(it).into_iter().flatten() {
                         let t = h.throughput * s.weight;
                         if max_component(t) < settings.min_contribution {
                             continue;
                         }
-                        match s.kind {
-                            RayKind::Reflection => out.counts.reflection += 1,
-                            RayKind::Refraction => out.counts.refraction += 1,
-                            RayKind::Camera => out.counts.camera += 1,
-                        }
-                        out.rays.push(RayItem {
+                        let item = RayItem {
                             ray: s.ray,
                             throughput: t,
                             path: h.path,
                             depth: h.depth + 1,
-                        });
+                        };
+                        match s.kind {
+                            RayKind::Refraction => {
+                                out.counts.refraction += 1;
+                                out.refractions.push(item);
+                            }
+                            RayKind::Reflection | RayKind::Camera => {
+                                out.counts.reflection += 1;
+                                out.reflections.push(item);
+                            }
+                        }
                     }
                 }
             }
-            out
-        })
-        .collect();
-    for out in outputs {
-        for (path, l) in out.emitted {
+        });
+    for out in &scratch[..chunks] {
+        for &(path, l) in &out.emitted {
             radiance[path as usize] += l;
         }
-        for i in 0..out.shadows.len() {
-            shadows.push(ShadowItem {
-                ray: out.shadows.ray(i),
-                t_max: out.shadows.t_max[i],
-                radiance: out.shadows.radiance[i],
-                path: out.shadows.path[i],
-            });
-        }
-        next.append(&out.rays);
+        shadows.append(&out.shadows);
+        next.append(&out.reflections);
         rays.add(&out.counts);
+    }
+    for out in &scratch[..chunks] {
+        next.append(&out.refractions);
     }
 }
 
@@ -289,49 +355,102 @@ pub fn shade_class(
     scene: &RenderScene,
     settings: &RenderSettings,
     hits: &HitQueue,
+    scratch: &mut ShadeScratch,
     radiance: &mut [Color],
     shadows: &mut ShadowQueue,
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    match class {
-        MaterialClass::Emissive => {
-            shade::<false, false>(scene, settings, hits, radiance, shadows, next, rays)
-        }
-        MaterialClass::Diffuse => {
-            shade::<true, false>(scene, settings, hits, radiance, shadows, next, rays)
-        }
-        MaterialClass::Mirror | MaterialClass::Glass => {
-            shade::<false, true>(scene, settings, hits, radiance, shadows, next, rays)
-        }
-        MaterialClass::General => {
-            shade::<true, true>(scene, settings, hits, radiance, shadows, next, rays)
-        }
+    let f = match class {
+        MaterialClass::Emissive => shade::<false, false>,
+        MaterialClass::Diffuse => shade::<true, false>,
+        MaterialClass::Mirror | MaterialClass::Glass => shade::<false, true>,
+        MaterialClass::General => shade::<true, true>,
+    };
+    f(
+        scene, settings, hits, scratch, radiance, shadows, next, rays,
+    )
+}
+
+/// Reusable buffers of [`trace_shadow_rays`].
+#[derive(Clone, Debug, Default)]
+pub struct ShadowScratch {
+    order: Vec<u32>,
+    visible_sorted: Vec<bool>,
+    visible: Vec<bool>,
+    starts: Vec<usize>,
+}
+
+impl ShadowScratch {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.order.capacity() * 4
+            + self.visible_sorted.capacity()
+            + self.visible.capacity()
+            + self.starts.capacity() * 8
     }
 }
 
 /// Stage: traces every shadow ray, stopping at the first blocker, and adds
 /// the radiance of the unblocked ones to their paths.
+///
+/// Rays are first binned by light (a stable counting sort): rays towards
+/// one light from neighbouring hits are nearly parallel, or converge on
+/// one point, so packs of [`LANES`] consecutive rays traverse the BVH
+/// together. Radiance is still added in queue order.
 pub fn trace_shadow_rays(
     scene: &RenderScene,
     shadows: &ShadowQueue,
-    scratch: &mut Vec<bool>,
+    scratch: &mut ShadowScratch,
     radiance: &mut [Color],
 ) {
-    scratch.clear();
-    scratch.resize(shadows.len(), false);
-    scratch
+    let n = shadows.len();
+    let lights = scene.lights.len().max(1);
+    let ShadowScratch {
+        order,
+        visible_sorted,
+        visible,
+        starts,
+    } = scratch;
+    starts.clear();
+    starts.resize(lights + 1, 0);
+    for &l in &shadows.light {
+        starts[l as usize + 1] += 1;
+    }
+    for k in 0..lights {
+        starts[k + 1] += starts[k];
+    }
+    order.clear();
+    order.resize(n, 0);
+    for (j, &l) in shadows.light.iter().enumerate() {
+        order[starts[l as usize]] = j as u32;
+        starts[l as usize] += 1;
+    }
+    visible_sorted.clear();
+    visible_sorted.resize(n, false);
+    visible_sorted
         .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(c, out)| {
-            let base = c * CHUNK;
-            for (i, visible) in out.iter_mut().enumerate() {
-                let j = base + i;
-                *visible = !scene.occluded(&shadows.ray(j), 0.0, shadows.t_max[j]);
+        .zip(order.par_chunks(CHUNK))
+        .for_each(|(vis, idx)| {
+            for (v, ids) in vis.chunks_mut(LANES).zip(idx.chunks(LANES)) {
+                let rays: [Ray; LANES] =
+                    std::array::from_fn(|l| shadows.ray(ids[l.min(ids.len() - 1)] as usize));
+                let t_max: [f32; LANES] =
+                    std::array::from_fn(|l| shadows.t_max[ids[l.min(ids.len() - 1)] as usize]);
+                let blocked = scene.occluded_packet(&rays[..ids.len()], &t_max[..ids.len()]);
+                for (l, out) in v.iter_mut().enumerate() {
+                    *out = (blocked >> l) & 1 == 0;
+                }
             }
         });
-    for (j, &visible) in scratch.iter().enumerate() {
-        if visible {
+    // Back to queue order, so paths receive light in a fixed order.
+    visible.clear();
+    visible.resize(n, false);
+    for (&j, &v) in order.iter().zip(visible_sorted.iter()) {
+        visible[j as usize] = v;
+    }
+    for (j, &v) in visible.iter().enumerate() {
+        if v {
             radiance[shadows.path[j] as usize] += shadows.radiance[j];
         }
     }

@@ -167,6 +167,29 @@ enum FileShape {
         #[serde(default)]
         smooth: bool,
     },
+    #[serde(rename = "torus_knot")]
+    TorusKnot {
+        #[serde(default = "knot_p")]
+        p: u32,
+        #[serde(default = "knot_q")]
+        q: u32,
+        radius: f32,
+        tube: f32,
+        segments: u32,
+        sides: u32,
+        #[serde(default = "yes")]
+        smooth: bool,
+    },
+}
+
+fn knot_p() -> u32 {
+    2
+}
+fn knot_q() -> u32 {
+    3
+}
+fn yes() -> bool {
+    true
 }
 
 #[derive(Deserialize, Default)]
@@ -506,15 +529,46 @@ impl Ctx<'_> {
                 top_radius: *top_radius,
                 half_height: *half_height,
             },
-            FileShape::Mesh {
-                positions,
-                indices,
-                smooth,
-            } => {
-                let data = MeshData {
-                    positions: positions.iter().map(|p| Vec3::from(*p)).collect(),
-                    indices: indices.clone(),
-                    ..Default::default()
+            FileShape::Mesh { .. } | FileShape::TorusKnot { .. } => {
+                let (data, smooth) = match &o.shape {
+                    FileShape::Mesh {
+                        positions,
+                        indices,
+                        smooth,
+                    } => (
+                        MeshData {
+                            positions: positions.iter().map(|p| Vec3::from(*p)).collect(),
+                            indices: indices.clone(),
+                            ..Default::default()
+                        },
+                        smooth,
+                    ),
+                    FileShape::TorusKnot {
+                        p,
+                        q,
+                        radius,
+                        tube,
+                        segments,
+                        sides,
+                        smooth,
+                    } => {
+                        if !(radius.is_finite() && *radius > 0.0 && tube.is_finite() && *tube > 0.0)
+                        {
+                            return Err("torus_knot radius and tube must be positive".into());
+                        }
+                        if !(3..=100_000).contains(segments) || !(3..=1000).contains(sides) {
+                            return Err(format!(
+                                "torus_knot needs 3..=100000 segments and 3..=1000 sides, got {segments} and {sides}"
+                            ));
+                        }
+                        (
+                            crate::procedural::torus_knot(
+                                *p, *q, *radius, *tube, *segments, *sides,
+                            ),
+                            smooth,
+                        )
+                    }
+                    _ => unreachable!("matched above"),
                 };
                 let mode = if *smooth {
                     NormalMode::Smooth
