@@ -120,8 +120,22 @@ const MAX_SPARSE_ELEMENTS: usize = 1 << 27;
 /// [`Error::Load`] naming `path` and what is wrong with the file or with
 /// a file it references.
 pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc> {
+    let bytes = crate::loader::read_regular_file(path)
+        .map_err(|e| Error::load(path, format!("cannot read file: {e}")))?;
+    load_gltf_bytes(&bytes, path, quality)
+}
+
+/// Loads a glTF 2.0 document (`.gltf` JSON or `.glb` binary, told apart by
+/// the GLB magic) from memory. `path` names the file in messages, and its
+/// folder is where external buffers and images are looked up; it is not
+/// read itself. This is the entry point of the glTF fuzz target (`fuzz/`).
+pub fn load_gltf_bytes(
+    bytes: &[u8],
+    path: &Path,
+    quality: BuildQuality,
+) -> crate::Result<SceneDesc> {
     let mut state = State::default();
-    let result = open(path).and_then(|ctx| build_scene(&ctx, &mut state, quality));
+    let result = open(bytes, path).and_then(|ctx| build_scene(&ctx, &mut state, quality));
     state.print_warnings(path);
     result.map_err(|message| Error::load(path, message))
 }
@@ -171,15 +185,14 @@ impl State {
 // Reading the file
 // ---------------------------------------------------------------------------
 
-/// Reads, parses and validates the document and loads its buffers.
-fn open(path: &Path) -> Result<Ctx, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+/// Parses and validates the document and loads its buffers.
+fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
     let is_glb = bytes.starts_with(b"glTF");
     if is_glb {
-        check_glb_header(&bytes)?;
+        check_glb_header(bytes)?;
     }
     let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| match e {
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| match e {
             gltf::Error::Deserialize(e) => format!("cannot parse glTF JSON: {e}"),
             gltf::Error::Binary(e) => format!("invalid GLB container: {e}"),
             e => format!("cannot parse glTF: {e}"),
@@ -347,7 +360,7 @@ fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, String> {
     } else {
         base.join(percent_decode_str(uri)?)
     };
-    std::fs::read(&file).map_err(|e| e.to_string())
+    crate::loader::read_regular_file(&file)
 }
 
 /// Decodes `%XX` escapes.

@@ -27,3 +27,19 @@ pub fn load(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
         )),
     }
 }
+
+/// Reads a whole file, refusing anything but a regular file: a path to a
+/// device such as `/dev/zero` or `/dev/stdin`, or to a FIFO, would never
+/// end (or block) and a hostile scene could name one. The error is the
+/// message for the user.
+pub(crate) fn read_regular_file(path: &Path) -> std::result::Result<Vec<u8>, String> {
+    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        return Err(if meta.is_dir() {
+            "is a directory, not a file".into()
+        } else {
+            "is not a regular file (a device, FIFO or socket)".into()
+        });
+    }
+    std::fs::read(path).map_err(|e| e.to_string())
+}

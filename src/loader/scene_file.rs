@@ -256,10 +256,20 @@ struct FileInclude {
 
 /// Loads a TOML scene file (see the README for the schema).
 pub fn load_scene_file(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
-    let text = std::fs::read_to_string(path)
+    let bytes = crate::loader::read_regular_file(path)
         .map_err(|e| Error::load(path, format!("cannot read scene file: {e}")))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| Error::load(path, "cannot read scene file: it is not valid UTF-8"))?;
+    parse_scene_file(&text, path, quality)
+}
+
+/// Parses the text of a TOML scene file. `path` names the file in messages
+/// and its folder is where relative paths (textures, included glTF files)
+/// are looked up; it is not read itself. This is the entry point of the
+/// scene-format fuzz target (`fuzz/`).
+pub fn parse_scene_file(text: &str, path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
     let file: FileScene =
-        toml::from_str(&text).map_err(|e| Error::load(path, format!("invalid scene file: {e}")))?;
+        toml::from_str(text).map_err(|e| Error::load(path, format!("invalid scene file: {e}")))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let ctx = Ctx {
         path,
@@ -412,7 +422,12 @@ impl Ctx<'_> {
             }
             FileTexture::Image { path } => {
                 let full = self.base.join(path);
-                let img = image::open(&full)
+                let bytes = crate::loader::read_regular_file(&full)
+                    .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?;
+                let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+                    .with_guessed_format()
+                    .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?
+                    .decode()
                     .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?
                     .to_rgb32f();
                 let (width, height) = img.dimensions();
