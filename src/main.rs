@@ -24,10 +24,17 @@ struct Cli {
     command: Command,
 }
 
+mod bench;
+
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene file (.toml, .gltf or .glb) to an image (.png or .exr).
     Render(RenderArgs),
+    /// Compare the recursive and the wavefront integrator on scenes: run
+    /// both alternately and report median times, rays, Mrays/s, queue
+    /// memory, wavefront stage times, the speedup, and closest-hit
+    /// throughput of single rays and packets.
+    Bench(bench::BenchArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -142,6 +149,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render(args),
+        Command::Bench(args) => bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -238,3 +238,42 @@ fn stats_file_reports_the_render() {
     assert_eq!(json["nonfinite_samples"], 0);
     assert_eq!(json["primitives"], 3);
 }
+
+#[test]
+fn bench_compares_both_integrators_as_json() {
+    let out = prism()
+        .args([
+            "bench", "--runs", "1", "--width", "24", "--height", "16", "--json",
+        ])
+        .arg(assets().join("whitted.toml"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let scene = &json[0];
+    let ints = scene["integrators"].as_array().unwrap();
+    assert_eq!(ints.len(), 2);
+    assert_eq!(ints[0]["integrator"], "recursive");
+    assert_eq!(ints[1]["integrator"], "wavefront");
+    // Same rays, whichever integrator traces them.
+    assert_eq!(ints[0]["rays"], ints[1]["rays"]);
+    assert_eq!(ints[0]["rays"]["camera"], 24 * 16);
+    assert!(ints[1]["peak_queue_bytes"].as_u64().unwrap() > 0);
+    assert!(
+        ints[1]["stage_seconds"]["intersect_closest"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert!(scene["speedup_wavefront"].as_f64().unwrap() > 0.0);
+    assert!(
+        scene["closest_hit_mrays"]["camera_packets"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+}

@@ -30,6 +30,7 @@ use crate::queues::{
 };
 use crate::rng::Sampler;
 use crate::scene::{Hit, RenderScene};
+use glam::Vec3A;
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
@@ -40,8 +41,11 @@ use crate::stats::{RayCounts, RenderCounters};
 /// small enough to balance two to a few dozen threads.
 pub const CHUNK: usize = 1024;
 
-/// Default number of paths (pixel samples) per batch.
-pub const DEFAULT_BATCH_PATHS: usize = 1 << 16;
+/// Default number of paths (pixel samples) per batch. Render time hardly
+/// depends on it between 2048 and 65536 on the benchmark scenes (measured
+/// with `prism render --batch-paths`), but queue memory grows with it: with
+/// 48 lights a batch of 65536 paths held 466 MB of queues, 8192 hold 58 MB.
+pub const DEFAULT_BATCH_PATHS: usize = 1 << 13;
 
 /// Wall time spent in each stage, in seconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -160,16 +164,28 @@ pub fn intersect_closest(
             }
             let end = ((c + 1) * CHUNK).min(rays.len());
             let mut found = [None; LANES];
+            let mut coherent = false;
             for i in c * CHUNK..end {
                 let lane = (i - c * CHUNK) % LANES;
                 if lane == 0 {
-                    // Consecutive rays are traced together as one packet.
+                    // Neighbouring rays (camera rays of adjacent pixels,
+                    // reflections off one smooth surface) are traced as one
+                    // packet when they point the same way; others alone.
                     let n = (end - i).min(LANES);
-                    let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                    scene.intersect_packet(&packet[..n], &mut found);
+                    coherent = is_coherent(&rays.direction[i..i + n]);
+                    if coherent {
+                        let packet: [Ray; LANES] =
+                            std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
+                        scene.intersect_packet(&packet[..n], &mut found);
+                    }
                 }
                 let (path, throughput, depth) = (rays.path[i], rays.throughput[i], rays.depth[i]);
-                match found[lane] {
+                let hit = if coherent {
+                    found[lane]
+                } else {
+                    scene.intersect(&rays.ray(i), 0.0, f32::INFINITY)
+                };
+                match hit {
                     None => esc.push(path, throughput),
                     Some(h) => {
                         let class = classes[h.material as usize];
@@ -194,6 +210,19 @@ pub fn intersect_closest(
             q.append(l);
         }
     }
+}
+
+/// Smallest cosine between the first direction of a group and the others
+/// for the group to be traced as a packet. Measured on the benchmark
+/// scenes (see the README): packets of divergent rays visit the union of
+/// their nodes and cost more than single rays.
+pub const PACKET_MIN_COS: f32 = 0.9;
+
+/// True when `dirs` (unit) all lie within the packet cone of the first.
+#[inline]
+pub fn is_coherent(dirs: &[Vec3A]) -> bool {
+    let d0 = dirs[0];
+    dirs.iter().all(|d| d.dot(d0) >= PACKET_MIN_COS)
 }
 
 /// Stage: escaped rays bring back the background.
