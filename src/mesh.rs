@@ -71,6 +71,10 @@ pub struct MeshHit {
 /// Surface attributes at a mesh hit, in object space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeshSurface {
+    /// Hit point in object space, interpolated from the triangle's
+    /// vertices: correct to a few ulps of its own coordinates, whereas
+    /// `ray.at(t)` carries the rounding of the ray's origin.
+    pub point: Vec3A,
     /// Geometric normal (unnormalised, by winding order).
     pub geometric_normal: Vec3A,
     /// Shading normal (unnormalised; equals the geometric one for flat meshes).
@@ -723,6 +727,7 @@ impl Mesh {
             None => Vec2::ZERO,
         };
         MeshSurface {
+            point: p0 + (p1 - p0) * hit.b1 + (p2 - p0) * hit.b2,
             geometric_normal,
             shading_normal,
             uv,

@@ -87,6 +87,45 @@ pub fn offset_origin(p: Vec3A, n: Vec3A) -> Vec3A {
     Vec3A::new(step(p.x, n.x), step(p.y, n.y), step(p.z, n.z))
 }
 
+/// Moves a new ray's origin `p` off the surface with geometric normal `n`
+/// (unit), to the side of `n` (pass `-n` for the other side), by
+/// [`OFFSET_ULPS`] units in the last place of the *largest* coordinate of
+/// `p`, without any scene-scale constant.
+///
+/// This is the offset for hit points computed from the object-space
+/// surface point ([`crate::shapes::ShapeHit::point`],
+/// [`crate::mesh::MeshSurface::point`], then the instance transform),
+/// which are correct to a few ulps of their own largest coordinate: every
+/// coordinate's error is then bounded by that ulp, and a move of several of
+/// them along the normal clears the surface at any scale.
+///
+/// [`offset_origin`] (Wachter and Binder) moves each coordinate by 256 of
+/// its *own* ulps, and by a fixed 2^-16 below 1/32. With hit points
+/// computed as `ray.at(t)`, whose error grows with the distance of the
+/// ray's origin, its fixed offset is what keeps unit-sized scenes free of
+/// acne, but it is too large for a scene scaled by 1e-4 (contact shadows
+/// vanish) and too small for one scaled by 1e4 (acne on a floor at
+/// `y = 0`), and 256 ulps of 1e5 is 2 units, which skips small occluders
+/// in a translated scene (`tests/robustness.rs`, scale invariance). Do not
+/// use this function with `ray.at(t)` points: their error is not bounded
+/// by the point's own ulps (seen: acne on a cone 10 units from the camera).
+#[inline]
+pub fn offset_origin_relative(p: Vec3A, n: Vec3A) -> Vec3A {
+    // At least one ulp of the largest coordinate (also for denormals and
+    // the exact origin, where the error is zero anyway).
+    let magnitude = p.abs().max_element().max(f32::MIN_POSITIVE);
+    let q = p + n * (OFFSET_ULPS * f32::EPSILON * magnitude);
+    if q.is_finite() { q } else { p }
+}
+
+/// Size of the [`offset_origin_relative`] move, in ulps of the point's
+/// largest coordinate. A hit point from an object-space surface point
+/// carries about 3 roundings of the instance transform (and of the
+/// barycentric or projection step before it); 16 covers that with a
+/// margin, and along the normal's largest component (at least 1/sqrt(3)
+/// of it) the move is still 9 ulps, so the point always moves.
+pub const OFFSET_ULPS: f32 = 16.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -94,6 +94,12 @@ pub enum Shape {
 pub struct ShapeHit {
     /// Ray parameter of the hit.
     pub t: f32,
+    /// Hit point in object space, projected back onto the surface: correct
+    /// to a few ulps of its own coordinates, whereas `ray.at(t)` carries
+    /// the rounding of the ray's origin, which for a distant origin is far
+    /// larger (and is what makes secondary rays self-intersect at large
+    /// scales). Transform it to world space for shading.
+    pub point: Vec3A,
     /// Outward geometric normal in object space (not necessarily unit).
     pub normal: Vec3A,
     /// Surface parameterisation, used for textures.
@@ -275,7 +281,8 @@ impl Shape {
                 intersect_hyperboloid(r, *waist_radius, *top_radius, *half_height, lo, hi)
             }),
         }?;
-        (hit.t.is_finite() && hit.normal.is_finite() && hit.uv.is_finite()).then_some(hit)
+        (hit.t.is_finite() && hit.point.is_finite() && hit.normal.is_finite() && hit.uv.is_finite())
+            .then_some(hit)
     }
 }
 
@@ -481,6 +488,16 @@ fn pick_root(
         .find(|&(_, p)| inside(p))
 }
 
+/// One Newton step from `p` onto the implicit surface `f = 0` along the
+/// gradient (`f` returns the value and the gradient); `p` itself if the
+/// step is not finite.
+#[inline]
+fn project(p: Vec3A, f: &impl Fn(Vec3A) -> (f32, Vec3A)) -> Vec3A {
+    let (value, grad) = f(p);
+    let q = p - grad * (value / grad.length_squared());
+    if q.is_finite() { q } else { p }
+}
+
 /// Azimuth `atan2(z, x)` mapped to `[0, 1]`.
 #[inline]
 fn azimuth_u(p: Vec3A) -> f32 {
@@ -503,6 +520,7 @@ fn intersect_sphere(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHi
     let (t, p) = pick_root(roots, ray, t_min, t_max, f, |_| true)?;
     Some(ShapeHit {
         t,
+        point: p * (r / p.length()),
         normal: p,
         uv: spherical_uv(p),
     })
@@ -520,6 +538,10 @@ fn intersect_ellipsoid(ray: &Ray, radii: Vec3, t_min: f32, t_max: f32) -> Option
     let (t, p) = pick_root(roots, ray, t_min, t_max, f, |_| true)?;
     Some(ShapeHit {
         t,
+        point: {
+            let q = p / radii;
+            radii * (q / q.length())
+        },
         normal: p / (radii * radii),
         uv: spherical_uv(p / radii),
     })
@@ -540,6 +562,7 @@ fn intersect_plane(ray: &Ray, t_min: f32, t_max: f32) -> Option<ShapeHit> {
     let (t, p) = hit_y0(ray, t_min, t_max)?;
     Some(ShapeHit {
         t,
+        point: Vec3A::new(p.x, 0.0, p.z),
         normal: Vec3A::Y,
         uv: Vec2::new(p.x, p.z),
     })
@@ -553,6 +576,7 @@ fn intersect_disk(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHit>
     }
     Some(ShapeHit {
         t,
+        point: Vec3A::new(p.x, 0.0, p.z),
         normal: Vec3A::Y,
         uv: Vec2::new(p.x / r * 0.5 + 0.5, p.z / r * 0.5 + 0.5),
     })
@@ -589,6 +613,7 @@ fn intersect_polygon(ray: &Ray, vertices: &[Vec3], t_min: f32, t_max: f32) -> Op
     let v_axis = u_axis.cross(n_unit);
     Some(ShapeHit {
         t,
+        point: p - n * (n.dot(p - Vec3A::from(vertices[0])) / n.length_squared()),
         normal: n,
         uv: Vec2::new(p.dot(u_axis), p.dot(v_axis)),
     })
@@ -615,6 +640,10 @@ fn intersect_cylinder(
     })?;
     Some(ShapeHit {
         t,
+        point: {
+            let l = (p.x * p.x + p.z * p.z).sqrt();
+            Vec3A::new(p.x * (r / l), p.y, p.z * (r / l))
+        },
         normal: Vec3A::new(p.x, 0.0, p.z),
         uv: Vec2::new(azimuth_u(p), (p.y - y_min) / (y_max - y_min)),
     })
@@ -645,6 +674,7 @@ fn intersect_cone(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Option<S
     let normal = Vec3A::new(p.x, k2 * (h - p.y), p.z);
     Some(ShapeHit {
         t,
+        point: project(p, &f),
         normal: if normal == Vec3A::ZERO {
             Vec3A::Y
         } else {
@@ -673,6 +703,7 @@ fn intersect_paraboloid(ray: &Ray, r: f32, h: f32, t_min: f32, t_max: f32) -> Op
     let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| p.y >= 0.0 && p.y <= h)?;
     Some(ShapeHit {
         t,
+        point: project(p, &f),
         normal: Vec3A::new(2.0 * k * p.x, -1.0, 2.0 * k * p.z),
         uv: Vec2::new(azimuth_u(p), p.y / h),
     })
@@ -705,6 +736,7 @@ fn intersect_hyperboloid(
     let (t, p) = pick_root(roots, ray, t_min, t_max, f, |p| p.y.abs() <= half_height)?;
     Some(ShapeHit {
         t,
+        point: project(p, &f),
         normal: Vec3A::new(p.x, -m * p.y, p.z),
         uv: Vec2::new(azimuth_u(p), (p.y + half_height) / (2.0 * half_height)),
     })

@@ -30,7 +30,7 @@ use std::sync::Arc;
 use glam::{DVec3, Quat, Vec3, Vec3A};
 use prism::math::Ray;
 use prism::mesh::WatertightRay;
-use prism::optics::offset_origin;
+use prism::optics::{OFFSET_ULPS, offset_origin, offset_origin_relative};
 use prism::shapes::Shape;
 use proptest::prelude::*;
 
@@ -441,9 +441,10 @@ proptest! {
         }
     }
 
-    /// `offset_origin` always moves the point to the requested side of the
-    /// plane through it, by a bounded amount, at every magnitude from 1e-30
-    /// to 1e30 (loaders reject coordinates beyond 1e15).
+    /// `offset_origin` and `offset_origin_relative` always move the point
+    /// to the requested side of the plane through it, by a bounded amount,
+    /// at every magnitude from 1e-30 to 1e30 (loaders reject coordinates
+    /// beyond 1e15) and for exact zeros of either sign.
     #[test]
     fn offset_origin_moves_to_the_requested_side(
         mant in vec3(-1.0..1.0),
@@ -463,13 +464,22 @@ proptest! {
         if zero & 2 != 0 { p.y = -0.0; }
         if zero & 4 != 0 { p.z = 0.0; }
         for side in [n, -n] {
+            // Wachter-Binder: at most 256 ulps per coordinate, 2^-16 near 0.
             let q = offset_origin(p, side);
             prop_assert!(q.is_finite());
             let moved = (d64(q) - d64(p)).dot(d64(side));
             prop_assert!(moved > 0.0, "offset_origin({p}, {side}) = {q} is not on the requested side");
-            // At most 256 ulps per coordinate (2^-16 near the origin).
             let bound = (p.abs() * (512.0 * f32::EPSILON)).max(Vec3A::splat(1.0 / 32768.0));
             prop_assert!((q - p).abs().cmple(bound).all(), "offset {} too large for {p}", q - p);
+            // Relative: OFFSET_ULPS ulps of the largest coordinate (plus the
+            // rounding of the addition).
+            let q = offset_origin_relative(p, side);
+            prop_assert!(q.is_finite());
+            let moved = (d64(q) - d64(p)).dot(d64(side));
+            prop_assert!(moved > 0.0, "offset_origin_relative({p}, {side}) = {q} is not on the requested side");
+            let m = p.abs().max_element().max(f32::MIN_POSITIVE);
+            let bound = Vec3A::splat(2.0 * OFFSET_ULPS * f32::EPSILON * m);
+            prop_assert!((q - p).abs().cmple(bound).all(), "relative offset {} too large for {p}", q - p);
         }
     }
 }
