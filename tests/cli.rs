@@ -74,6 +74,17 @@ fn expected_words(name: &str) -> &'static [&'static str] {
         "missing_include.toml" => &["model.gltf"],
         "singular_scale.toml" => &["scale"],
         "nonconvex_polygon.toml" => &["convex"],
+        "huge_accessor_count.gltf" => &["accessor", "48000000000"],
+        "huge_buffer.gltf" => &["buffer", "4000000000000"],
+        "device_buffer.gltf" => &["/dev/zero", "regular file"],
+        "deep_nodes.gltf" => &["deeper than 1024"],
+        "json_chunk_overrun.glb" => &["json chunk"],
+        "huge_mesh_index.toml" => &["4000000000"],
+        "nan_transform.toml" => &["translate", "nan"],
+        "huge_image.toml" => &["image size", "32768"],
+        "device_include.toml" => &["/dev/zero", "regular file"],
+        "huge_torus_knot.toml" => &["torus_knot", "4000000"],
+        "zero_area_polygon.toml" => &["zero area"],
         _ => &[],
     }
 }
@@ -91,12 +102,17 @@ fn every_corpus_file_fails_cleanly() {
         count += 1;
         let out_file = dir.path().join(format!("{name}.png"));
         // No size on the command line: the scene's own settings must be checked.
+        let start = std::time::Instant::now();
         let out = render(&path, &out_file, &[]);
+        // Hostile sizes must be refused before any work is done, not after
+        // minutes of allocation (each file takes milliseconds).
+        let seconds = start.elapsed().as_secs_f64();
+        assert!(seconds < 20.0, "{name} took {seconds:.1} s to fail");
         let mut words = vec![name.as_str()];
         words.extend_from_slice(expected_words(&name));
         assert_clean_failure(&out, &out_file, &words);
     }
-    assert!(count >= 15, "corpus has only {count} files");
+    assert!(count >= 26, "corpus has only {count} files");
 }
 
 #[test]

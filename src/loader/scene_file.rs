@@ -182,6 +182,9 @@ enum FileShape {
     },
 }
 
+/// Most vertices a `torus_knot` may have (about 8 million triangles).
+const MAX_KNOT_VERTICES: u64 = 4_000_000;
+
 fn knot_p() -> u32 {
     2
 }
@@ -574,6 +577,14 @@ impl Ctx<'_> {
                         if !(3..=100_000).contains(segments) || !(3..=1000).contains(sides) {
                             return Err(format!(
                                 "torus_knot needs 3..=100000 segments and 3..=1000 sides, got {segments} and {sides}"
+                            ));
+                        }
+                        // Each side allows its maximum, but not both: 1e8
+                        // vertices and 2e8 triangles would need tens of GB
+                        // and minutes of BVH build for a few bytes of input.
+                        if *segments as u64 * *sides as u64 > MAX_KNOT_VERTICES {
+                            return Err(format!(
+                                "torus_knot with {segments} segments x {sides} sides has more than {MAX_KNOT_VERTICES} vertices"
                             ));
                         }
                         (
