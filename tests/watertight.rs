@@ -682,3 +682,47 @@ fn parallel_and_axis_rays_give_finite_results() {
         );
     }
 }
+
+/// The packet traversal used by the wavefront integrator must find the same
+/// hits as single rays, for rays aimed at the shared edges and vertices of
+/// a closed cube from near and far.
+///
+/// Ignored: `src/packet.rs` (which this work may not change) tests boxes
+/// without a rounding margin, as obvhs did, and 868 of the 200,000 rays
+/// here (0.4 %) pass through the cube; e.g. from (157.42471, -56.16274,
+/// -149.45332) along (-158.42471, 55.16274, 148.45332): single ray hits at
+/// t = 1, the packet misses. Growing each box by the margin of
+/// `prism::mesh::traverse_bvh` (16 EPS times the largest magnitude of the
+/// origin and the node, per axis) and using exact reciprocals with an
+/// inside test for zero direction components fixes it.
+#[test]
+#[ignore = "src/packet.rs box test has no rounding margin; see the comment"]
+fn packet_traversal_has_no_leaks() {
+    use prism::packet::{LANES, Packet};
+    let solid = cube("unit cube", Vec3::ZERO, 1.0, Quat::IDENTITY);
+    let mesh = solid.mesh();
+    let mut rng = Rng(15);
+    let mut differ = 0;
+    for _ in 0..200_000 / LANES {
+        let rays: Vec<Ray> = (0..LANES)
+            .map(|_| {
+                let a = solid.positions[rng.next_u64() as usize % 8];
+                let b = solid.positions[rng.next_u64() as usize % 8];
+                let target = a + (b - a) * rng.f();
+                let o = target + rng.dir() * 10f32.powf(rng.range(0.0, 3.0));
+                Ray::new(o.into(), (target - o).into())
+            })
+            .collect();
+        let mut packet = Packet::new(&rays, &[0.0; LANES], &[f32::INFINITY; LANES]);
+        let mut best = [None; LANES];
+        mesh.intersect_packet(&mut packet, (1 << LANES) - 1, &mut best);
+        for (ray, b) in rays.iter().zip(best) {
+            let single = mesh.intersect(ray, 0.0, f32::INFINITY).map(|h| h.t);
+            differ += (single != b.map(|h| h.t)) as usize;
+        }
+    }
+    assert_eq!(
+        differ, 0,
+        "{differ} of 200000 rays differ between packet and single-ray traversal"
+    );
+}
