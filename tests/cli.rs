@@ -85,6 +85,7 @@ fn expected_words(name: &str) -> &'static [&'static str] {
         "device_include.toml" => &["/dev/zero", "regular file"],
         "huge_torus_knot.toml" => &["torus_knot", "4000000"],
         "zero_area_polygon.toml" => &["zero area"],
+        "deep_recursion.toml" => &["max_depth", "1024"],
         _ => &[],
     }
 }

@@ -182,6 +182,9 @@ enum FileShape {
     },
 }
 
+/// Largest `settings.max_depth` a scene file may ask for.
+const MAX_DEPTH_SETTING: u32 = 1024;
+
 /// Most vertices a `torus_knot` may have (about 8 million triangles).
 const MAX_KNOT_VERTICES: u64 = 4_000_000;
 
@@ -380,6 +383,16 @@ impl Ctx<'_> {
             if !(m >= 0.0 && m.is_finite()) {
                 return Err(self.err(format!(
                     "settings.min_contribution must be finite and non-negative, got {m}"
+                )));
+            }
+        }
+        if let Some(d) = s.max_depth {
+            // The recursive integrator recurses once per bounce: between two
+            // facing perfect mirrors a depth of 20000 overflowed its stack
+            // (an abort, not an error).
+            if d > MAX_DEPTH_SETTING {
+                return Err(self.err(format!(
+                    "settings.max_depth must be at most {MAX_DEPTH_SETTING}, got {d}"
                 )));
             }
         }
