@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use glam::{BVec3A, UVec2, Vec2, Vec3, Vec3A};
+use glam::{BVec3A, UVec2, Vec2, Vec3, Vec3A, Vec4};
 use obvhs::cwbvh::node::{CwBvhNode, extract_byte64};
 use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh};
 
@@ -320,17 +320,6 @@ pub(crate) fn padded_aabb(min: Vec3A, max: Vec3A) -> Aabb {
 /// areas overflow f32 and obvhs's builder breaks (seen panicking at 1.7e38).
 pub const MAX_COORDINATE: f32 = 1.0e15;
 
-/// Converts a ray for obvhs traversal.
-///
-/// Negative zeros in the direction are made positive: obvhs 0.4 picks the
-/// child order from `direction < 0` but the slab test's reciprocal from the
-/// sign bit, so a `-0.0` component makes CwBvh traversal miss boxes the ray
-/// passes through (found by `tests/bvh.rs`).
-#[inline]
-pub(crate) fn obvhs_ray(ray: &Ray, t_min: f32, t_max: f32) -> obvhs::ray::Ray {
-    obvhs::ray::Ray::new(ray.origin, ray.direction + Vec3A::ZERO, t_min, t_max)
-}
-
 /// A ray prepared for conservative box tests against CwBvh nodes.
 #[derive(Clone, Copy, Debug)]
 struct BoxRay {
@@ -339,7 +328,6 @@ struct BoxRay {
     /// Axes along which the ray does not move (or whose reciprocal
     /// overflows): the slab test becomes an inside/outside test.
     parallel: BVec3A,
-    any_parallel: bool,
     /// Largest coordinate magnitude of the origin.
     origin_mag: f32,
 }
@@ -353,7 +341,6 @@ impl BoxRay {
             origin: ray.origin,
             inv_dir,
             parallel,
-            any_parallel: parallel.any(),
             origin_mag: ray.origin.abs().max_element(),
         }
     }
@@ -375,56 +362,83 @@ impl BoxRay {
 /// quantised child boxes. (obvhs's own node test pads nothing, ignores
 /// `tmin` and rejects every box closer than `t = 1e-4`, a scene-scale
 /// epsilon; both made rays leak through closed meshes.)
-const NODE_MARGIN_EPS: f32 = 16.0;
+pub const NODE_MARGIN_EPS: f32 = 16.0;
 
 /// Conservative ray-box test of the eight children of a CwBvh node;
 /// returns the hit mask in obvhs's encoding.
-#[inline]
+///
+/// The eight children are tested as two groups of four in SIMD registers
+/// (`glam::Vec4`); testing one child at a time was four times slower.
+#[inline(always)]
 fn intersect_node(node: &CwBvhNode, ray: &BoxRay, t_min: f32, t_max: f32, oct_inv4: u32) -> u32 {
     let extent = node.compute_extent();
     let p = Vec3A::from(node.p);
     let node_mag = p.abs().max((p + extent * 255.0).abs()).max_element();
-    let margin = Vec3A::splat(NODE_MARGIN_EPS * f32::EPSILON * (ray.origin_mag + node_mag));
+    let margin = NODE_MARGIN_EPS * f32::EPSILON * (ray.origin_mag + node_mag);
+    let quads = |q: &[u8; 8]| {
+        (
+            Vec4::new(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32),
+            Vec4::new(q[4] as f32, q[5] as f32, q[6] as f32, q[7] as f32),
+        )
+    };
+    let mut enter = [Vec4::splat(t_min); 2];
+    let mut exit = [Vec4::splat(t_max); 2];
+    let axes = [
+        (&node.child_min_x, &node.child_max_x),
+        (&node.child_min_y, &node.child_max_y),
+        (&node.child_min_z, &node.child_max_z),
+    ];
+    for (a, (q_lo, q_hi)) in axes.into_iter().enumerate() {
+        let (lo0, lo1) = quads(q_lo);
+        let (hi0, hi1) = quads(q_hi);
+        if ray.parallel.test(a) {
+            // The ray does not move along this axis: inside the slab or not.
+            let e = Vec4::splat(extent[a]);
+            let o = Vec4::splat(ray.origin[a]);
+            let (base_lo, base_hi) = (Vec4::splat(p[a] - margin), Vec4::splat(p[a] + margin));
+            for (k, (ql, qh)) in [(lo0, hi0), (lo1, hi1)].into_iter().enumerate() {
+                let inside = (ql * e + base_lo).cmple(o) & o.cmple(qh * e + base_hi);
+                enter[k] = Vec4::select(inside, enter[k], Vec4::INFINITY);
+                exit[k] = Vec4::select(inside, exit[k], Vec4::NEG_INFINITY);
+            }
+        } else {
+            // Plane distances as one multiply-add from the quantised
+            // coordinates; the reassociation's rounding (a few ulps of
+            // |origin - node| / |direction|) is far inside the margin.
+            let inv = ray.inv_dir[a];
+            let scale = Vec4::splat(extent[a] * inv);
+            let off_lo = Vec4::splat((p[a] - margin - ray.origin[a]) * inv);
+            let off_hi = Vec4::splat((p[a] + margin - ray.origin[a]) * inv);
+            for (k, (ql, qh)) in [(lo0, hi0), (lo1, hi1)].into_iter().enumerate() {
+                let t_lo = ql * scale + off_lo;
+                let t_hi = qh * scale + off_hi;
+                let (near, far) = if inv >= 0.0 {
+                    (t_lo, t_hi)
+                } else {
+                    (t_hi, t_lo)
+                };
+                enter[k] = enter[k].max(near);
+                exit[k] = exit[k].min(far);
+            }
+        }
+    }
+    // The products carry one rounding each: widen by a few ulps.
+    let widen = 4.0 * f32::EPSILON;
+    let mut hits = 0u32;
+    for k in 0..2 {
+        let e = enter[k] - enter[k].abs() * widen;
+        let x = exit[k] + exit[k].abs() * widen;
+        hits |= e.cmple(x).bitmask() << (4 * k);
+    }
+    if hits == 0 {
+        return 0;
+    }
     let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
     let mut hit_mask = 0;
-    for child in 0..8 {
-        let child_bits = extract_byte64(child_bits8, child);
-        if child_bits == 0 {
-            continue;
-        }
-        let q_lo = Vec3A::new(
-            node.child_min_x[child] as f32,
-            node.child_min_y[child] as f32,
-            node.child_min_z[child] as f32,
-        );
-        let q_hi = Vec3A::new(
-            node.child_max_x[child] as f32,
-            node.child_max_y[child] as f32,
-            node.child_max_z[child] as f32,
-        );
-        let lo = q_lo * extent + p - margin;
-        let hi = q_hi * extent + p + margin;
-        let ta = (lo - ray.origin) * ray.inv_dir;
-        let tb = (hi - ray.origin) * ray.inv_dir;
-        let mut near = ta.min(tb);
-        let mut far = ta.max(tb);
-        if ray.any_parallel {
-            let inside = lo.cmple(ray.origin) & ray.origin.cmple(hi);
-            let (open_near, open_far) = (
-                Vec3A::select(inside, Vec3A::NEG_INFINITY, Vec3A::INFINITY),
-                Vec3A::select(inside, Vec3A::INFINITY, Vec3A::NEG_INFINITY),
-            );
-            near = Vec3A::select(ray.parallel, open_near, near);
-            far = Vec3A::select(ray.parallel, open_far, far);
-        }
-        // The products carry one rounding each: widen by a few ulps.
-        let enter = near.max_element();
-        let exit = far.min_element();
-        let enter = enter - enter.abs() * (4.0 * f32::EPSILON);
-        let exit = exit + exit.abs() * (4.0 * f32::EPSILON);
-        if enter.max(t_min) <= exit.min(t_max) {
-            hit_mask |= child_bits << extract_byte64(bit_index8, child);
-        }
+    while hits != 0 {
+        let c = hits.trailing_zeros() as usize;
+        hits &= hits - 1;
+        hit_mask |= extract_byte64(child_bits8, c) << extract_byte64(bit_index8, c);
     }
     hit_mask
 }

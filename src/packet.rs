@@ -27,8 +27,15 @@ pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 pub struct Packet {
     /// Origins, per axis.
     pub origin: [[f32; LANES]; 3],
-    /// Reciprocal directions, per axis (zeros become large finite values).
+    /// Reciprocal directions, per axis (0 where the direction component is
+    /// zero or its reciprocal overflows: see `parallel`).
     pub inv_dir: [[f32; LANES]; 3],
+    /// Per axis, the lanes that do not move along it: their slab test is
+    /// an inside/outside test.
+    pub parallel: [LaneMask; 3],
+    /// Largest coordinate magnitude of any lane's origin (for the box
+    /// margin, see [`crate::mesh::NODE_MARGIN_EPS`]).
+    pub origin_mag: f32,
     /// Interval starts.
     pub t_min: [f32; LANES],
     /// Interval ends; closest-hit traversal shrinks them as hits are found.
@@ -37,19 +44,6 @@ pub struct Packet {
     pub rays: [Ray; LANES],
     /// Lanes holding a ray.
     pub valid: LaneMask,
-}
-
-/// The reciprocal used for slab tests: signed zeros are treated as
-/// positive and zeros map to a large finite value, as obvhs does, so that
-/// boxes are never rejected for a ray the primitive test would accept.
-#[inline]
-fn safe_rcp(x: f32) -> f32 {
-    let x = x + 0.0;
-    if x.abs() <= f32::EPSILON {
-        1.0f32.copysign(x) / f32::EPSILON
-    } else {
-        1.0 / x
-    }
 }
 
 impl Packet {
@@ -61,6 +55,8 @@ impl Packet {
         let mut p = Packet {
             origin: [[0.0; LANES]; 3],
             inv_dir: [[0.0; LANES]; 3],
+            parallel: [0; 3],
+            origin_mag: 0.0,
             t_min: [0.0; LANES],
             // Unused lanes can never hit.
             t_max: [f32::NEG_INFINITY; LANES],
@@ -78,8 +74,16 @@ impl Packet {
     pub fn set_lane(&mut self, l: usize, r: Ray, t_min: f32, t_max: f32) {
         for a in 0..3 {
             self.origin[a][l] = r.origin[a];
-            self.inv_dir[a][l] = safe_rcp(r.direction[a]);
+            let inv = 1.0 / r.direction[a];
+            if inv.is_finite() {
+                self.inv_dir[a][l] = inv;
+                self.parallel[a] &= !(1 << l);
+            } else {
+                self.inv_dir[a][l] = 0.0;
+                self.parallel[a] |= 1 << l;
+            }
         }
+        self.origin_mag = self.origin_mag.max(r.origin.abs().max_element());
         self.t_min[l] = t_min;
         self.t_max[l] = t_max;
         self.rays[l] = r;
@@ -108,11 +112,33 @@ impl Packet {
             for a in 0..3 {
                 let s0 = (min[a] - self.origin[a][l]) * self.inv_dir[a][l];
                 let s1 = (max[a] - self.origin[a][l]) * self.inv_dir[a][l];
-                t0 = hi(t0, lo(s0, s1));
-                t1 = lo(t1, hi(s0, s1));
+                // A lane parallel to the axis is not limited by its slab
+                // here; the inside test below decides.
+                let open = (self.parallel[a] >> l) & 1 == 1;
+                let (n, f) = if open {
+                    (f32::NEG_INFINITY, f32::INFINITY)
+                } else {
+                    (lo(s0, s1), hi(s0, s1))
+                };
+                t0 = hi(t0, n);
+                t1 = lo(t1, f);
             }
-            near[l] = t0;
-            far[l] = t1;
+            // The products carry one rounding each: widen by a few ulps.
+            near[l] = t0 - t0.abs() * (4.0 * f32::EPSILON);
+            far[l] = t1 + t1.abs() * (4.0 * f32::EPSILON);
+        }
+        // Lanes that do not move along an axis: inside the slab or never.
+        for a in 0..3 {
+            let mut m = self.parallel[a];
+            while m != 0 {
+                let l = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let o = self.origin[a][l];
+                if !(min[a] <= o && o <= max[a]) {
+                    near[l] = f32::INFINITY;
+                    far[l] = f32::NEG_INFINITY;
+                }
+            }
         }
         let mut mask = 0;
         let mut nearest = f32::INFINITY;
@@ -171,6 +197,13 @@ pub fn traverse(
             continue;
         }
         let node = &bvh.nodes[index as usize];
+        // The same conservative margin as single-ray traversal, so that a
+        // packet never culls a box the watertight triangle test would enter.
+        let node_box = node.aabb();
+        let node_mag = node_box.min.abs().max(node_box.max.abs()).max_element();
+        let margin = Vec3A::splat(
+            crate::mesh::NODE_MARGIN_EPS * f32::EPSILON * (packet.origin_mag + node_mag),
+        );
         let mut children: [(u32, LaneMask, f32); 8] = [(0, 0, 0.0); 8];
         let mut count = 0;
         for c in 0..8 {
@@ -178,7 +211,7 @@ pub fn traverse(
                 continue;
             }
             let b = node.child_aabb(c);
-            let (hit, dist) = packet.hit_box(b.min, b.max, lanes);
+            let (hit, dist) = packet.hit_box(b.min - margin, b.max + margin, lanes);
             if hit == 0 {
                 continue;
             }
@@ -223,7 +256,8 @@ mod tests {
         let p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
         let (mask, near) = p.hit_box(Vec3A::splat(-1.0), Vec3A::splat(1.0), ALL_LANES);
         assert_eq!(mask, 0b1101);
-        assert_eq!(near, 4.0);
+        // Entry at 4, widened by a few ulps.
+        assert!(near <= 4.0 && near > 4.0 - 1e-5);
         // Lanes outside `active` and empty lanes never report a hit.
         let (mask, _) = p.hit_box(Vec3A::splat(-1.0), Vec3A::splat(1.0), 0b0001);
         assert_eq!(mask, 0b0001);

@@ -11,7 +11,7 @@ use obvhs::{aabb::Aabb, cwbvh::CwBvh};
 use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
-use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, build_bvh, obvhs_ray, padded_aabb};
+use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, build_bvh, padded_aabb, traverse_bvh};
 use crate::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
 use crate::shapes::Shape;
 use crate::transform::{InstanceTransform, Transform};
@@ -97,7 +97,11 @@ pub struct Hit {
 /// attributes are computed (done once, for the closest hit only).
 #[derive(Clone, Copy, Debug)]
 enum LocalHit {
-    Shape { normal: Vec3A, uv: Vec2 },
+    Shape {
+        point: Vec3A,
+        normal: Vec3A,
+        uv: Vec2,
+    },
     Mesh(crate::mesh::MeshHit),
 }
 
@@ -207,6 +211,7 @@ impl RenderScene {
                 (
                     h.t,
                     LocalHit::Shape {
+                        point: h.point,
                         normal: h.normal,
                         uv: h.uv,
                     },
@@ -239,21 +244,15 @@ impl RenderScene {
             }
         }
         if !self.tlas_instances.is_empty() {
-            let oray = obvhs_ray(ray, t_min, t_max);
-            let mut rh = obvhs::ray::RayHit::none();
-            self.tlas.ray_traverse(oray, &mut rh, |r, slot| {
+            traverse_bvh(&self.tlas, ray, t_min, t_max, false, |slot, t_max| {
                 let inst = self.tlas_instances[slot];
-                match self.intersect_instance(inst, ray, r.tmin, r.tmax) {
-                    Some((t, h)) => {
-                        best = Some((t, inst, h));
-                        t
-                    }
-                    None => f32::INFINITY,
-                }
+                let (t, h) = self.intersect_instance(inst, ray, t_min, t_max)?;
+                best = Some((t, inst, h));
+                Some(t)
             });
         }
         let (t, index, local) = best?;
-        Some(self.finish_hit(ray, t, index, local))
+        Some(self.finish_hit(t, index, local))
     }
 
     /// True when anything blocks the ray between `t_min` and `t_max`; stops
@@ -269,13 +268,9 @@ impl RenderScene {
         if self.tlas_instances.is_empty() {
             return false;
         }
-        let oray = obvhs_ray(ray, t_min, t_max);
-        !self.tlas.ray_traverse_miss(oray, |r, slot| {
-            if self.occludes_instance(self.tlas_instances[slot], ray, r.tmin, r.tmax) {
-                r.tmin
-            } else {
-                f32::INFINITY
-            }
+        traverse_bvh(&self.tlas, ray, t_min, t_max, true, |slot, t_max| {
+            self.occludes_instance(self.tlas_instances[slot], ray, t_min, t_max)
+                .then_some(t_min)
         })
     }
 
@@ -307,6 +302,7 @@ impl RenderScene {
                             h.t,
                             index,
                             LocalHit::Shape {
+                                point: h.point,
                                 normal: h.normal,
                                 uv: h.uv,
                             },
@@ -331,7 +327,7 @@ impl RenderScene {
             0
         });
         for (l, o) in out[..n].iter_mut().enumerate() {
-            *o = best[l].map(|(t, i, h)| self.finish_hit(&rays[l], t, i, h));
+            *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
         }
     }
 
@@ -392,6 +388,7 @@ impl RenderScene {
                     (
                         h.t,
                         LocalHit::Shape {
+                            point: h.point,
                             normal: h.normal,
                             uv: h.uv,
                         },
@@ -407,16 +404,19 @@ impl RenderScene {
             }
         }
         let (t, index, local) = best?;
-        Some(self.finish_hit(ray, t, index, local))
+        Some(self.finish_hit(t, index, local))
     }
 
-    fn finish_hit(&self, ray: &Ray, t: f32, index: u32, local: LocalHit) -> Hit {
+    fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
         let inst = &self.instances[index as usize];
         let xf = &inst.transform;
-        let (gn, sn, uv) = match (local, &inst.geometry) {
-            (LocalHit::Shape { normal, uv }, _) => {
+        // The point comes from the object-space surface point, correct to a
+        // few ulps of its own coordinates; `ray.at(t)` would carry the
+        // rounding of a possibly distant ray origin.
+        let (point, gn, sn, uv) = match (local, &inst.geometry) {
+            (LocalHit::Shape { point, normal, uv }, _) => {
                 let n = xf.normal(normal);
-                (n, n, uv)
+                (xf.to_world.transform_point3a(point), n, n, uv)
             }
             (LocalHit::Mesh(h), InstanceGeometry::Mesh(m)) => {
                 let s = m.surface(&h);
@@ -425,7 +425,7 @@ impl RenderScene {
                 if sn.dot(gn) < 0.0 {
                     sn = -sn;
                 }
-                (gn, sn, s.uv)
+                (xf.to_world.transform_point3a(s.point), gn, sn, s.uv)
             }
             (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => {
                 unreachable!("hit kind matches geometry")
@@ -433,7 +433,7 @@ impl RenderScene {
         };
         Hit {
             t,
-            point: ray.at(t),
+            point,
             geometric_normal: gn,
             shading_normal: sn,
             uv,

@@ -12,7 +12,7 @@ use glam::Vec3A;
 use crate::light::{LightSample, WorldLight};
 use crate::material::SurfaceSample;
 use crate::math::{Color, Ray};
-use crate::optics::{fresnel_dielectric, offset_origin, reflect, refract};
+use crate::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
 use crate::scene::{Hit, RenderScene};
 
 /// Everything shading needs to know about a hit, oriented towards the
@@ -109,7 +109,7 @@ pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery>
     if !(radiance.max_element() > 0.0) {
         return None;
     }
-    let origin = offset_origin(it.point, it.ng);
+    let origin = offset_origin_relative(it.point, it.ng);
     let t_max = if distance.is_finite() {
         // Distance from the offset origin, shortened by a relative margin
         // so the light's own position is never counted as a blocker.
@@ -166,7 +166,7 @@ pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
                 // The refracted ray must leave on the far side of the true surface.
                 if t.dot(it.ng) < 0.0 {
                     refraction = Some(Secondary {
-                        ray: Ray::new(offset_origin(it.point, -it.ng), t),
+                        ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
                         weight: s.transmission_tint * (s.transmission * (1.0 - f)),
                         kind: RayKind::Refraction,
                     });
@@ -182,7 +182,7 @@ pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
             r = reflect(d, it.ng);
         }
         Secondary {
-            ray: Ray::new(offset_origin(it.point, it.ng), r),
+            ray: Ray::new(offset_origin_relative(it.point, it.ng), r),
             weight: reflect_w,
             kind: RayKind::Reflection,
         }

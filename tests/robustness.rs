@@ -679,17 +679,15 @@ fn scale_invariance() {
 /// the pixels within 1 % after scaling by 1e-4 and 1e4, and no acne
 /// anywhere.
 ///
-/// It fails with the current `src/scene.rs`, which this file may not
-/// change: hit points are `ray.at(t)` in world space, whose rounding grows
-/// with the distance of the ray's origin (acne on the floor at 1e4), and
-/// the top-level BVH uses obvhs's own node test, which rejects every box
-/// closer than `t = 1e-4` (missed occluders at 1e-4). With hit points
-/// from `ShapeHit::point` / `MeshSurface::point` through the instance
-/// transform, `prism::mesh::traverse_bvh` for the top level and
-/// `prism::optics::offset_origin_relative` in `src/shading.rs`, this test
-/// passes: 100.00 % at 1e-4 and at 1e4, 91.9 % at 1e5, no acne.
+/// It failed while hit points were `ray.at(t)` in world space, whose
+/// rounding grows with the distance of the ray's origin (acne on the floor
+/// at 1e4), and while the top-level BVH used obvhs's own node test, which
+/// rejects every box closer than `t = 1e-4` (missed occluders at 1e-4).
+/// With hit points from `ShapeHit::point` / `MeshSurface::point` through
+/// the instance transform, `prism::mesh::traverse_bvh` for the top level
+/// and `prism::optics::offset_origin_relative` in `src/shading.rs`: 100.00 %
+/// at 1e-4 and at 1e4, 91.9 % at 1e5, no acne, for both integrators.
 #[test]
-#[ignore = "needs object-space hit points and the conservative top-level traversal in src/scene.rs"]
 fn scale_invariance_strict() {
     for &kind in KINDS {
         let (reference, runs) = scale_runs(kind);
