@@ -45,6 +45,10 @@ impl Default for RenderSettings {
 /// Largest image side accepted, to keep memory bounded.
 pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
 
+/// Largest maximum depth accepted: the recursive tracer uses one stack
+/// frame per bounce, and two facing mirrors reach any depth asked for.
+pub const MAX_DEPTH_LIMIT: u32 = 1024;
+
 impl RenderSettings {
     /// Rejects unusable settings with a message naming the setting.
     pub fn validate(&self) -> Result<(), String> {
@@ -58,6 +62,12 @@ impl RenderSettings {
             return Err(format!(
                 "image size {}x{} exceeds the maximum side of {MAX_IMAGE_SIDE} pixels",
                 self.width, self.height
+            ));
+        }
+        if self.max_depth > MAX_DEPTH_LIMIT {
+            return Err(format!(
+                "max depth {} exceeds the limit of {MAX_DEPTH_LIMIT}",
+                self.max_depth
             ));
         }
         if self.spp == 0 {
