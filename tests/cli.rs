@@ -81,6 +81,7 @@ fn expected_words(name: &str) -> &'static [&'static str] {
         "json_chunk_overrun.glb" => &["json chunk"],
         "huge_mesh_index.toml" => &["4000000000"],
         "nan_transform.toml" => &["translate", "nan"],
+        "huge_pixel_count.toml" => &["pixels"],
         "huge_image.toml" => &["image size", "32768"],
         "device_include.toml" => &["/dev/zero", "regular file"],
         "huge_torus_knot.toml" => &["torus_knot", "4000000"],

@@ -414,7 +414,7 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
     // hit the same shape again. Before Newton refinement of the roots, a
     // quarter of the cone's lit points shadowed themselves.
     use prism::math::Ray;
-    use prism::optics::offset_origin;
+    use prism::optics::offset_origin_relative;
     use prism::shapes::Shape;
     let shapes = [
         Shape::Cone {
@@ -460,7 +460,9 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
                 let Some(h) = shape.intersect(&r, 0.0, f32::INFINITY) else {
                     continue;
                 };
-                let p = r.at(h.t);
+                // As the shading path does: the object-space surface point
+                // and the scale-free relative offset.
+                let p = h.point;
                 let n = h.normal.normalize();
                 let ng = if n.dot(r.direction) < 0.0 { n } else { -n };
                 let wi = (light - p).normalize();
@@ -468,7 +470,7 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
                     continue;
                 }
                 lit += 1;
-                let shadow = Ray::new(offset_origin(p, ng), wi);
+                let shadow = Ray::new(offset_origin_relative(p, ng), wi);
                 // Open surfaces may legitimately shadow themselves far away
                 // (the inside wall); acne is a hit right at the origin.
                 if let Some(s) = shape.intersect(&shadow, 0.0, f32::INFINITY) {

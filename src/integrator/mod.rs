@@ -45,6 +45,13 @@ impl Default for RenderSettings {
 /// Largest image side accepted, to keep memory bounded.
 pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
 
+/// Largest number of pixels accepted (2^26, e.g. 8192 x 8192): the film
+/// alone takes 12 bytes per pixel.
+pub const MAX_PIXELS: u64 = 1 << 26;
+
+/// Largest number of samples per pixel accepted.
+pub const MAX_SPP: u32 = 1 << 20;
+
 /// Largest maximum depth accepted: the recursive tracer uses one stack
 /// frame per bounce, and two facing mirrors reach any depth asked for.
 pub const MAX_DEPTH_LIMIT: u32 = 1024;
@@ -62,6 +69,18 @@ impl RenderSettings {
             return Err(format!(
                 "image size {}x{} exceeds the maximum side of {MAX_IMAGE_SIDE} pixels",
                 self.width, self.height
+            ));
+        }
+        if self.width as u64 * self.height as u64 > MAX_PIXELS {
+            return Err(format!(
+                "image size {}x{} exceeds the maximum of {MAX_PIXELS} pixels",
+                self.width, self.height
+            ));
+        }
+        if self.spp > MAX_SPP {
+            return Err(format!(
+                "samples per pixel {} exceeds the maximum of {MAX_SPP}",
+                self.spp
             ));
         }
         if self.max_depth > MAX_DEPTH_LIMIT {
