@@ -313,8 +313,6 @@ pub struct ShadowItem {
     pub radiance: Color,
     /// Path index.
     pub path: u32,
-    /// Index of the light the ray goes to (used to group coherent rays).
-    pub light: u32,
 }
 
 /// Shadow rays, by field.
@@ -330,8 +328,6 @@ pub struct ShadowQueue {
     pub radiance: Vec<Color>,
     /// Path indices.
     pub path: Vec<u32>,
-    /// Light indices.
-    pub light: Vec<u32>,
 }
 
 impl ShadowQueue {
@@ -352,7 +348,6 @@ impl ShadowQueue {
         self.t_max.clear();
         self.radiance.clear();
         self.path.clear();
-        self.light.clear();
     }
 
     /// Appends a shadow ray.
@@ -368,7 +363,6 @@ impl ShadowQueue {
         self.t_max.push(item.t_max);
         self.radiance.push(item.radiance);
         self.path.push(item.path);
-        self.light.push(item.light);
     }
 
     /// The ray at `i`.
@@ -384,7 +378,6 @@ impl ShadowQueue {
         self.t_max.extend_from_slice(&other.t_max);
         self.radiance.extend_from_slice(&other.radiance);
         self.path.extend_from_slice(&other.path);
-        self.light.extend_from_slice(&other.light);
     }
 }
 
@@ -395,7 +388,6 @@ impl QueueBytes for ShadowQueue {
             + vec_bytes(&self.t_max)
             + vec_bytes(&self.radiance)
             + vec_bytes(&self.path)
-            + vec_bytes(&self.light)
     }
 }
 
@@ -447,7 +439,6 @@ mod tests {
             t_max: 1.0,
             radiance: Color::ONE,
             path: 0,
-            light: 0,
         });
     }
 }

@@ -30,7 +30,6 @@ use crate::queues::{
 };
 use crate::rng::Sampler;
 use crate::scene::{Hit, RenderScene};
-use glam::Vec3A;
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
@@ -168,11 +167,12 @@ pub fn intersect_closest(
             for i in c * CHUNK..end {
                 let lane = (i - c * CHUNK) % LANES;
                 if lane == 0 {
-                    // Neighbouring rays (camera rays of adjacent pixels,
-                    // reflections off one smooth surface) are traced as one
-                    // packet when they point the same way; others alone.
+                    // Camera rays of neighbouring pixels are traced as one
+                    // packet. Other rays go alone: for them, packets were
+                    // measured slower than single rays, whose node test is
+                    // SIMD across a node's children (see the README).
                     let n = (end - i).min(LANES);
-                    coherent = is_coherent(&rays.direction[i..i + n]);
+                    coherent = rays.depth[i] == 0;
                     if coherent {
                         let packet: [Ray; LANES] =
                             std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
@@ -210,19 +210,6 @@ pub fn intersect_closest(
             q.append(l);
         }
     }
-}
-
-/// Smallest cosine between the first direction of a group and the others
-/// for the group to be traced as a packet. Measured on the benchmark
-/// scenes (see the README): packets of divergent rays visit the union of
-/// their nodes and cost more than single rays.
-pub const PACKET_MIN_COS: f32 = 0.9;
-
-/// True when `dirs` (unit) all lie within the packet cone of the first.
-#[inline]
-pub fn is_coherent(dirs: &[Vec3A]) -> bool {
-    let d0 = dirs[0];
-    dirs.iter().all(|d| d.dot(d0) >= PACKET_MIN_COS)
 }
 
 /// Stage: escaped rays bring back the background.
@@ -316,7 +303,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                 out.interactions.push((it, h));
             }
             if LIT {
-                for (k, light) in scene.lights.iter().enumerate() {
+                for light in &scene.lights {
                     for (it, h) in &out.interactions {
                         if !it.is_lit_by_lights() {
                             continue;
@@ -328,7 +315,6 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                                 t_max: q.t_max,
                                 radiance: h.throughput * q.radiance,
                                 path: h.path,
-                                light: k as u32,
                             });
                         }
                     }
@@ -404,80 +390,41 @@ pub fn shade_class(
 /// Reusable buffers of [`trace_shadow_rays`].
 #[derive(Clone, Debug, Default)]
 pub struct ShadowScratch {
-    order: Vec<u32>,
-    visible_sorted: Vec<bool>,
     visible: Vec<bool>,
-    starts: Vec<usize>,
 }
 
 impl ShadowScratch {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.order.capacity() * 4
-            + self.visible_sorted.capacity()
-            + self.visible.capacity()
-            + self.starts.capacity() * 8
+        self.visible.capacity()
     }
 }
 
 /// Stage: traces every shadow ray, stopping at the first blocker, and adds
-/// the radiance of the unblocked ones to their paths.
+/// the radiance of the unblocked ones to their paths, in queue order.
 ///
-/// Rays are first binned by light (a stable counting sort): rays towards
-/// one light from neighbouring hits are nearly parallel, or converge on
-/// one point, so packs of [`LANES`] consecutive rays traverse the BVH
-/// together. Radiance is still added in queue order.
+/// Shadow rays are traced one at a time: binning them by light and
+/// tracing packs of eight was measured slower (`many_lights`: 0.78-0.86x
+/// of single rays with packets, see the README), because the single-ray
+/// node test is SIMD across a node's eight children already.
 pub fn trace_shadow_rays(
     scene: &RenderScene,
     shadows: &ShadowQueue,
     scratch: &mut ShadowScratch,
     radiance: &mut [Color],
 ) {
-    let n = shadows.len();
-    let lights = scene.lights.len().max(1);
-    let ShadowScratch {
-        order,
-        visible_sorted,
-        visible,
-        starts,
-    } = scratch;
-    starts.clear();
-    starts.resize(lights + 1, 0);
-    for &l in &shadows.light {
-        starts[l as usize + 1] += 1;
-    }
-    for k in 0..lights {
-        starts[k + 1] += starts[k];
-    }
-    order.clear();
-    order.resize(n, 0);
-    for (j, &l) in shadows.light.iter().enumerate() {
-        order[starts[l as usize]] = j as u32;
-        starts[l as usize] += 1;
-    }
-    visible_sorted.clear();
-    visible_sorted.resize(n, false);
-    visible_sorted
+    let visible = &mut scratch.visible;
+    visible.clear();
+    visible.resize(shadows.len(), false);
+    visible
         .par_chunks_mut(CHUNK)
-        .zip(order.par_chunks(CHUNK))
-        .for_each(|(vis, idx)| {
-            for (v, ids) in vis.chunks_mut(LANES).zip(idx.chunks(LANES)) {
-                let rays: [Ray; LANES] =
-                    std::array::from_fn(|l| shadows.ray(ids[l.min(ids.len() - 1)] as usize));
-                let t_max: [f32; LANES] =
-                    std::array::from_fn(|l| shadows.t_max[ids[l.min(ids.len() - 1)] as usize]);
-                let blocked = scene.occluded_packet(&rays[..ids.len()], &t_max[..ids.len()]);
-                for (l, out) in v.iter_mut().enumerate() {
-                    *out = (blocked >> l) & 1 == 0;
-                }
+        .enumerate()
+        .for_each(|(c, out)| {
+            for (i, v) in out.iter_mut().enumerate() {
+                let j = c * CHUNK + i;
+                *v = !scene.occluded(&shadows.ray(j), 0.0, shadows.t_max[j]);
             }
         });
-    // Back to queue order, so paths receive light in a fixed order.
-    visible.clear();
-    visible.resize(n, false);
-    for (&j, &v) in order.iter().zip(visible_sorted.iter()) {
-        visible[j as usize] = v;
-    }
     for (j, &v) in visible.iter().enumerate() {
         if v {
             radiance[shadows.path[j] as usize] += shadows.radiance[j];
