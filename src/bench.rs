@@ -126,15 +126,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.batch_paths == 0 {
         return Err(Error::Invalid("--batch-paths must be at least 1".into()));
     }
-    let threads = match args.threads {
-        Some(0) => return Err(Error::Invalid("--threads must be at least 1".into())),
-        Some(n) => n,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::Invalid(format!("cannot start {threads} threads: {e}")))?;
+    let (pool, threads) = crate::thread_pool(args.threads)?;
     let mut results = Vec::new();
     for scene in &args.scenes {
         let r = pool.install(|| bench_scene(scene, &args, threads))?;
@@ -153,16 +145,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
 
 fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<SceneResult> {
     let desc = prism::loader::load(path, BuildQuality::Medium)?;
-    let s = &desc.settings;
-    let d = RenderSettings::default();
-    let settings = RenderSettings {
-        width: args.width.or(s.width).unwrap_or(d.width),
-        height: args.height.or(s.height).unwrap_or(d.height),
-        spp: args.spp.or(s.spp).unwrap_or(d.spp),
-        max_depth: args.max_depth.or(s.max_depth).unwrap_or(d.max_depth),
-        min_contribution: s.min_contribution.unwrap_or(d.min_contribution),
-        seed: s.seed.unwrap_or(d.seed),
-    };
+    let settings = prism::desc::SettingsDesc {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        ..Default::default()
+    }
+    .resolve(&desc.settings);
     settings
         .validate()
         .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;

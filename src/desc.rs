@@ -66,6 +66,25 @@ pub struct SettingsDesc {
     pub exposure: Option<f32>,
 }
 
+impl SettingsDesc {
+    /// Render settings from these values, falling back to `under` (the
+    /// scene's own settings, say) and then to the defaults.
+    pub fn resolve(&self, under: &SettingsDesc) -> crate::integrator::RenderSettings {
+        let d = crate::integrator::RenderSettings::default();
+        crate::integrator::RenderSettings {
+            width: self.width.or(under.width).unwrap_or(d.width),
+            height: self.height.or(under.height).unwrap_or(d.height),
+            spp: self.spp.or(under.spp).unwrap_or(d.spp),
+            max_depth: self.max_depth.or(under.max_depth).unwrap_or(d.max_depth),
+            min_contribution: self
+                .min_contribution
+                .or(under.min_contribution)
+                .unwrap_or(d.min_contribution),
+            seed: self.seed.or(under.seed).unwrap_or(d.seed),
+        }
+    }
+}
+
 /// A whole scene as loaded from files.
 #[derive(Clone, Debug, Default)]
 pub struct SceneDesc {

@@ -8,9 +8,9 @@ use std::time::Instant;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use prism::desc::Geometry;
+use prism::desc::{Geometry, SettingsDesc};
 use prism::error::{Error, Result};
-use prism::integrator::{IntegratorKind, RenderSettings};
+use prism::integrator::IntegratorKind;
 use prism::mesh::BuildQuality;
 use prism::output::{OutputFormat, PngOptions, ToneMap};
 use prism::stats::RenderStats;
@@ -172,7 +172,13 @@ fn render(args: RenderArgs) -> Result<()> {
             )));
         }
     }
-    let threads = match args.threads {
+    let (pool, threads) = thread_pool(args.threads)?;
+    pool.install(|| render_with_pool(&args, threads, wall))
+}
+
+/// A rayon pool of `threads` workers (one per core by default).
+fn thread_pool(threads: Option<usize>) -> Result<(rayon::ThreadPool, usize)> {
+    let threads = match threads {
         Some(0) => return Err(Error::Invalid("--threads must be at least 1".into())),
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
@@ -181,7 +187,7 @@ fn render(args: RenderArgs) -> Result<()> {
         .num_threads(threads)
         .build()
         .map_err(|e| Error::Invalid(format!("cannot start {threads} threads: {e}")))?;
-    pool.install(|| render_with_pool(&args, threads, wall))
+    Ok((pool, threads))
 }
 
 fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
@@ -200,18 +206,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     }
 
     let s = &desc.settings;
-    let d = RenderSettings::default();
-    let settings = RenderSettings {
-        width: args.width.or(s.width).unwrap_or(d.width),
-        height: args.height.or(s.height).unwrap_or(d.height),
-        spp: args.spp.or(s.spp).unwrap_or(d.spp),
-        max_depth: args.max_depth.or(s.max_depth).unwrap_or(d.max_depth),
-        min_contribution: args
-            .min_contribution
-            .or(s.min_contribution)
-            .unwrap_or(d.min_contribution),
-        seed: args.seed.or(s.seed).unwrap_or(d.seed),
-    };
+    let settings = SettingsDesc {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        min_contribution: args.min_contribution,
+        seed: args.seed,
+        exposure: None,
+    }
+    .resolve(s);
     settings.validate().map_err(|e| {
         Error::Invalid(format!(
             "{}: invalid render settings (from the command line or the scene's [settings]): {e}",

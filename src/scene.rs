@@ -105,6 +105,17 @@ enum LocalHit {
     Mesh(crate::mesh::MeshHit),
 }
 
+impl LocalHit {
+    #[inline]
+    fn shape(h: &crate::shapes::ShapeHit) -> Self {
+        LocalHit::Shape {
+            point: h.point,
+            normal: h.normal,
+            uv: h.uv,
+        }
+    }
+}
+
 /// A scene ready for rendering: instances, top-level BVH, materials, lights.
 #[derive(Debug)]
 pub struct RenderScene {
@@ -204,22 +215,32 @@ impl RenderScene {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, LocalHit)> {
+        self.intersect_instance_with(index, ray, t_min, t_max, false)
+    }
+
+    /// Closest hit on one instance; meshes by their BVH, or by testing
+    /// every triangle when `brute_force` is set.
+    #[inline]
+    fn intersect_instance_with(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        brute_force: bool,
+    ) -> Option<(f32, LocalHit)> {
         let inst = &self.instances[index as usize];
         let local = to_object(inst, ray);
         match &inst.geometry {
-            InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).map(|h| {
-                (
-                    h.t,
-                    LocalHit::Shape {
-                        point: h.point,
-                        normal: h.normal,
-                        uv: h.uv,
-                    },
-                )
-            }),
-            InstanceGeometry::Mesh(m) => m
+            InstanceGeometry::Shape(s) => s
                 .intersect(&local, t_min, t_max)
-                .map(|h| (h.t, LocalHit::Mesh(h))),
+                .map(|h| (h.t, LocalHit::shape(&h))),
+            InstanceGeometry::Mesh(m) => if brute_force {
+                m.intersect_brute_force(&local, t_min, t_max)
+            } else {
+                m.intersect(&local, t_min, t_max)
+            }
+            .map(|h| (h.t, LocalHit::Mesh(h))),
         }
     }
 
@@ -298,15 +319,7 @@ impl RenderScene {
                     let local = to_object(inst, &p.rays[l]);
                     if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
                         p.t_max[l] = h.t;
-                        best[l] = Some((
-                            h.t,
-                            index,
-                            LocalHit::Shape {
-                                point: h.point,
-                                normal: h.normal,
-                                uv: h.uv,
-                            },
-                        ));
+                        best[l] = Some((h.t, index, LocalHit::shape(&h)));
                     }
                 }),
                 InstanceGeometry::Mesh(m) => {
@@ -381,26 +394,10 @@ impl RenderScene {
     pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
-        for (i, inst) in self.instances.iter().enumerate() {
-            let local = to_object(inst, ray);
-            let found = match &inst.geometry {
-                InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).map(|h| {
-                    (
-                        h.t,
-                        LocalHit::Shape {
-                            point: h.point,
-                            normal: h.normal,
-                            uv: h.uv,
-                        },
-                    )
-                }),
-                InstanceGeometry::Mesh(m) => m
-                    .intersect_brute_force(&local, t_min, t_max)
-                    .map(|h| (h.t, LocalHit::Mesh(h))),
-            };
-            if let Some((t, h)) = found {
+        for i in 0..self.instances.len() as u32 {
+            if let Some((t, h)) = self.intersect_instance_with(i, ray, t_min, t_max, true) {
                 t_max = t;
-                best = Some((t, i as u32, h));
+                best = Some((t, i, h));
             }
         }
         let (t, index, local) = best?;
