@@ -367,6 +367,5 @@ fn write_stats(path: &Path, stats: &RenderStats) -> Result<()> {
     };
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| err(e.to_string()))?;
     std::io::Write::write_all(&mut tmp, json.as_bytes()).map_err(|e| err(e.to_string()))?;
-    tmp.persist(path).map_err(|e| err(e.error.to_string()))?;
-    Ok(())
+    prism::output::persist_readable(tmp, path).map_err(err)
 }

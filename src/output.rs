@@ -147,8 +147,23 @@ pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
         w.flush().map_err(|e| err(e.to_string()))?;
     }
     tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
-    tmp.persist(path).map_err(|e| err(e.error.to_string()))?;
-    Ok(())
+    persist_readable(tmp, path).map_err(err)
+}
+
+/// Renames a finished temporary file to `path`, first giving it the
+/// permissions of an ordinary new file (temporary files are created
+/// readable by their owner only).
+pub fn persist_readable(tmp: tempfile::NamedTempFile, path: &Path) -> Result<(), String> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| e.to_string())?;
+    }
+    tmp.persist(path)
+        .map(|_| ())
+        .map_err(|e| e.error.to_string())
 }
 
 /// Views f32s as native-endian bytes (what the image encoders expect).
@@ -231,6 +246,12 @@ mod tests {
         assert_eq!(read_image(&png).unwrap().width, 3);
         // Only the two images: no temporary file is left behind.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&png).unwrap().permissions().mode();
+            assert_eq!(mode & 0o777, 0o644, "images are readable by others");
+        }
     }
 
     #[test]

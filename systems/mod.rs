@@ -40,8 +40,6 @@ use crate::shapes::Shape;
 use crate::stats::RenderCounters;
 use crate::transform::Transform;
 
-pub use crate::camera::Camera as CameraComponent;
-
 /// The stages of a frame, run in this order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum PrismSystems {
