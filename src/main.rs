@@ -164,13 +164,13 @@ fn render(args: RenderArgs) -> Result<()> {
     let wall = Instant::now();
     // Fail on a bad output name before spending time on the render.
     OutputFormat::from_path(&args.output)?;
-    if let Some(s) = &args.stats {
-        if s.extension().and_then(|e| e.to_str()) != Some("json") {
-            return Err(Error::Invalid(format!(
-                "--stats {}: the statistics file must end in .json",
-                s.display()
-            )));
-        }
+    if let Some(s) = &args.stats
+        && s.extension().and_then(|e| e.to_str()) != Some("json")
+    {
+        return Err(Error::Invalid(format!(
+            "--stats {}: the statistics file must end in .json",
+            s.display()
+        )));
     }
     let (pool, threads) = thread_pool(args.threads)?;
     pool.install(|| render_with_pool(&args, threads, wall))
@@ -198,10 +198,10 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let mut mesh_build_seconds = 0.0;
     let mut seen = std::collections::HashSet::new();
     for o in &desc.objects {
-        if let Geometry::Mesh(m) = &o.geometry {
-            if seen.insert(Arc::as_ptr(m)) {
-                mesh_build_seconds += m.build_seconds;
-            }
+        if let Geometry::Mesh(m) = &o.geometry
+            && seen.insert(Arc::as_ptr(m))
+        {
+            mesh_build_seconds += m.build_seconds;
         }
     }
 

@@ -652,16 +652,16 @@ impl Mesh {
         crate::packet::traverse(&self.bvh, packet, lanes, |p, hit, slot| {
             let [p0, p1, p2] = self.corners[slot];
             for_each_lane(hit, |l| {
-                if let Some(w) = &wt[l] {
-                    if let Some((t, b1, b2)) = w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]) {
-                        p.t_max[l] = t;
-                        best[l] = Some(MeshHit {
-                            t,
-                            triangle: slot as u32,
-                            b1,
-                            b2,
-                        });
-                    }
+                if let Some(w) = &wt[l]
+                    && let Some((t, b1, b2)) = w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l])
+                {
+                    p.t_max[l] = t;
+                    best[l] = Some(MeshHit {
+                        t,
+                        triangle: slot as u32,
+                        b1,
+                        b2,
+                    });
                 }
             });
             0
@@ -678,10 +678,10 @@ impl Mesh {
             let [p0, p1, p2] = self.corners[slot];
             let mut now = 0;
             for_each_lane(hit, |l| {
-                if let Some(w) = &wt[l] {
-                    if w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]).is_some() {
-                        now |= 1 << l;
-                    }
+                if let Some(w) = &wt[l]
+                    && w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]).is_some()
+                {
+                    now |= 1 << l;
                 }
             });
             blocked |= now;

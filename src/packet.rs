@@ -240,6 +240,16 @@ pub fn traverse(
     }
 }
 
+/// Calls `f` for every lane in `mask`, lowest first.
+#[inline(always)]
+pub fn for_each_lane(mut mask: LaneMask, mut f: impl FnMut(usize)) {
+    while mask != 0 {
+        let l = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        f(l);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -262,15 +272,5 @@ mod tests {
         let (mask, _) = p.hit_box(Vec3A::splat(-1.0), Vec3A::splat(1.0), 0b0001);
         assert_eq!(mask, 0b0001);
         let _ = Aabb::empty();
-    }
-}
-
-/// Calls `f` for every lane in `mask`, lowest first.
-#[inline(always)]
-pub fn for_each_lane(mut mask: LaneMask, mut f: impl FnMut(usize)) {
-    while mask != 0 {
-        let l = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        f(l);
     }
 }

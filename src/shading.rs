@@ -161,16 +161,16 @@ pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
         let cos_i = it.ns.dot(it.wo).max(0.0);
         let f = fresnel_dielectric(cos_i, eta);
         reflect_w += Color::splat(s.transmission * f);
-        if f < 1.0 {
-            if let Some(t) = refract(d, it.ns, eta) {
-                // The refracted ray must leave on the far side of the true surface.
-                if t.dot(it.ng) < 0.0 {
-                    refraction = Some(Secondary {
-                        ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
-                        weight: s.transmission_tint * (s.transmission * (1.0 - f)),
-                        kind: RayKind::Refraction,
-                    });
-                }
+        if f < 1.0
+            && let Some(t) = refract(d, it.ns, eta)
+        {
+            // The refracted ray must leave on the far side of the true surface.
+            if t.dot(it.ng) < 0.0 {
+                refraction = Some(Secondary {
+                    ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
+                    weight: s.transmission_tint * (s.transmission * (1.0 - f)),
+                    kind: RayKind::Refraction,
+                });
             }
         }
     }

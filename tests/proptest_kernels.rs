@@ -346,7 +346,7 @@ proptest! {
         sides in 3usize..10,
         radius in 0.1f32..10.0,
         axis in vec3(-1.0..1.0),
-        angle in 0.0f32..6.28,
+        angle in 0.0f32..std::f32::consts::TAU,
         offset in vec3(-5.0..5.0),
         from in origin(),
         aim in vec3(-1.5..1.5),

@@ -473,10 +473,10 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
                 let shadow = Ray::new(offset_origin_relative(p, ng), wi);
                 // Open surfaces may legitimately shadow themselves far away
                 // (the inside wall); acne is a hit right at the origin.
-                if let Some(s) = shape.intersect(&shadow, 0.0, f32::INFINITY) {
-                    if s.t < 1e-2 {
-                        self_shadowed += 1;
-                    }
+                if let Some(s) = shape.intersect(&shadow, 0.0, f32::INFINITY)
+                    && s.t < 1e-2
+                {
+                    self_shadowed += 1;
                 }
             }
         }

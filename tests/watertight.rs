@@ -365,7 +365,7 @@ fn check_ray(
         hit.is_some(),
         "{name}: occluded() disagrees with intersect() for {ray:?}"
     );
-    if tally.rays % brute_every == 0 {
+    if tally.rays.is_multiple_of(brute_every) {
         tally.brute += 1;
         let brute = mesh.intersect_brute_force(ray, 0.0, f32::INFINITY);
         assert_eq!(

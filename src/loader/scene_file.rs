@@ -379,12 +379,12 @@ impl Ctx<'_> {
     }
 
     fn settings(&self, s: &FileSettings) -> Result<SettingsDesc> {
-        if let Some(m) = s.min_contribution {
-            if !(m >= 0.0 && m.is_finite()) {
-                return Err(self.err(format!(
-                    "settings.min_contribution must be finite and non-negative, got {m}"
-                )));
-            }
+        if let Some(m) = s.min_contribution
+            && !(m >= 0.0 && m.is_finite())
+        {
+            return Err(self.err(format!(
+                "settings.min_contribution must be finite and non-negative, got {m}"
+            )));
         }
         if let Some(d) = s.max_depth {
             // The recursive integrator recurses once per bounce: between two
@@ -396,10 +396,10 @@ impl Ctx<'_> {
                 )));
             }
         }
-        if let Some(e) = s.exposure {
-            if !e.is_finite() {
-                return Err(self.err(format!("settings.exposure must be finite, got {e}")));
-            }
+        if let Some(e) = s.exposure
+            && !e.is_finite()
+        {
+            return Err(self.err(format!("settings.exposure must be finite, got {e}")));
         }
         Ok(SettingsDesc {
             width: s.width,
