@@ -223,7 +223,6 @@ pub fn handle_escaped_rays(escaped: &EscapedQueue, background: Color, radiance: 
 /// shading allocates nothing once the buffers have grown.
 #[derive(Default, Debug)]
 pub struct ShadeOutput {
-    interactions: Vec<(Interaction, HitItem)>,
     emitted: Vec<(u32, Color)>,
     shadows: ShadowQueue,
     reflections: RayQueue,
@@ -233,7 +232,6 @@ pub struct ShadeOutput {
 
 impl ShadeOutput {
     fn clear(&mut self) {
-        self.interactions.clear();
         self.emitted.clear();
         self.shadows.clear();
         self.reflections.clear();
@@ -243,8 +241,7 @@ impl ShadeOutput {
 
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.interactions.capacity() * std::mem::size_of::<(Interaction, HitItem)>()
-            + self.emitted.capacity() * std::mem::size_of::<(u32, Color)>()
+        self.emitted.capacity() * std::mem::size_of::<(u32, Color)>()
             + self.shadows.bytes()
             + self.reflections.bytes()
             + self.refractions.bytes()
@@ -260,9 +257,9 @@ pub type ShadeScratch = Vec<ShadeOutput>;
 /// above the contribution threshold, up to the maximum depth.
 ///
 /// `LIT` and `SCATTER` select the lobes the class has, so each class's
-/// kernel runs only the code it needs. Within a chunk, shadow rays are
-/// written light by light, and reflection rays before refraction rays, so
-/// that rays traced together next are alike.
+/// kernel runs only the code it needs. Within a chunk, reflection rays go
+/// before refraction rays, so that neighbouring rays of the next bounce
+/// are alike.
 #[allow(clippy::too_many_arguments)]
 pub fn shade<const LIT: bool, const SCATTER: bool>(
     scene: &RenderScene,
@@ -300,15 +297,9 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                     out.emitted
                         .push((h.path, h.throughput * it.surface.emission));
                 }
-                out.interactions.push((it, h));
-            }
-            if LIT {
-                for light in &scene.lights {
-                    for (it, h) in &out.interactions {
-                        if !it.is_lit_by_lights() {
-                            continue;
-                        }
-                        if let Some(q) = direct_light(it, light) {
+                if LIT && it.is_lit_by_lights() {
+                    for light in &scene.lights {
+                        if let Some(q) = direct_light(&it, light) {
                             out.counts.shadow += 1;
                             out.shadows.push(ShadowItem {
                                 ray: q.ray,
@@ -319,13 +310,8 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                         }
                     }
                 }
-            }
-            if SCATTER {
-                for (it, h) in &out.interactions {
-                    if h.depth >= settings.max_depth {
-                        continue;
-                    }
-                    for s in scatter(it).into_iter().flatten() {
+                if SCATTER && h.depth < settings.max_depth {
+                    for s in scatter(&it).into_iter().flatten() {
                         let t = h.throughput * s.weight;
                         if max_component(t) < settings.min_contribution {
                             continue;
