@@ -8,6 +8,7 @@
 use glam::{Vec2, Vec3A};
 
 use crate::math::{Color, Ray};
+use crate::scene::Hit;
 
 /// Memory held by a queue's buffers, in bytes (capacity, not length).
 pub trait QueueBytes {
@@ -143,6 +144,39 @@ pub struct HitItem {
     pub path: u32,
     /// Bounce depth of the ray that hit.
     pub depth: u32,
+}
+
+impl HitItem {
+    /// Queues `hit`, found by a ray along `direction` on path `path`.
+    #[inline]
+    pub fn new(hit: &Hit, direction: Vec3A, throughput: Color, path: u32, depth: u32) -> Self {
+        Self {
+            direction,
+            point: hit.point,
+            geometric_normal: hit.geometric_normal,
+            shading_normal: hit.shading_normal,
+            uv: hit.uv,
+            material: hit.material,
+            throughput,
+            path,
+            depth,
+        }
+    }
+
+    /// The surface point as a [`Hit`] for shading (the queue keeps neither
+    /// the distance nor the instance, which shading does not need).
+    #[inline]
+    pub fn hit(&self) -> Hit {
+        Hit {
+            t: 0.0,
+            point: self.point,
+            geometric_normal: self.geometric_normal,
+            shading_normal: self.shading_normal,
+            uv: self.uv,
+            instance: 0,
+            material: self.material,
+        }
+    }
 }
 
 /// Hits of one material class, by field.

@@ -29,7 +29,7 @@ use crate::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
 };
 use crate::rng::Sampler;
-use crate::scene::{Hit, RenderScene};
+use crate::scene::RenderScene;
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
@@ -189,17 +189,13 @@ pub fn intersect_closest(
                     None => esc.push(path, throughput),
                     Some(h) => {
                         let class = classes[h.material as usize];
-                        local.queues[class as usize].push(HitItem {
-                            direction: rays.direction[i],
-                            point: h.point,
-                            geometric_normal: h.geometric_normal,
-                            shading_normal: h.shading_normal,
-                            uv: h.uv,
-                            material: h.material,
+                        local.queues[class as usize].push(HitItem::new(
+                            &h,
+                            rays.direction[i],
                             throughput,
                             path,
                             depth,
-                        });
+                        ));
                     }
                 }
             }
@@ -283,15 +279,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
             let end = ((c + 1) * CHUNK).min(hits.len());
             for i in c * CHUNK..end {
                 let h = hits.get(i);
-                let hit = Hit {
-                    t: 0.0,
-                    point: h.point,
-                    geometric_normal: h.geometric_normal,
-                    shading_normal: h.shading_normal,
-                    uv: h.uv,
-                    instance: 0,
-                    material: h.material,
-                };
+                let hit = h.hit();
                 let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &hit);
                 if it.surface.emission != Color::ZERO {
                     out.emitted
