@@ -138,6 +138,16 @@ pub fn generate_camera_rays(
     rays.camera += count as u64;
 }
 
+/// One reusable output buffer per [`CHUNK`] of `items` work items: grows
+/// `buffers` when needed and returns the ones this call uses.
+fn chunk_buffers<T: Default>(buffers: &mut Vec<T>, items: usize) -> &mut [T] {
+    let chunks = items.div_ceil(CHUNK);
+    if buffers.len() < chunks {
+        buffers.resize_with(chunks, Default::default);
+    }
+    &mut buffers[..chunks]
+}
+
 /// Stage: closest hit for every ray of `rays`; misses go to `escaped`,
 /// hits to the queue of their material's class. Chunks are traced and
 /// routed in parallel into `scratch` queues, then appended in chunk order.
@@ -150,10 +160,7 @@ pub fn intersect_closest(
     hits: &mut ClassQueues,
 ) {
     let chunks = rays.len().div_ceil(CHUNK);
-    if scratch.len() < chunks {
-        scratch.resize_with(chunks, Default::default);
-    }
-    scratch[..chunks]
+    chunk_buffers(scratch, rays.len())
         .par_iter_mut()
         .enumerate()
         .for_each(|(c, (esc, local))| {
@@ -268,10 +275,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     rays: &mut RayCounts,
 ) {
     let chunks = hits.len().div_ceil(CHUNK);
-    if scratch.len() < chunks {
-        scratch.resize_with(chunks, Default::default);
-    }
-    scratch[..chunks]
+    chunk_buffers(scratch, hits.len())
         .par_iter_mut()
         .enumerate()
         .for_each(|(c, out)| {
