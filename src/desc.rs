@@ -64,6 +64,12 @@ pub struct SettingsDesc {
     pub seed: Option<u64>,
     /// Exposure in stops for PNG output.
     pub exposure: Option<f32>,
+    /// Light transport.
+    pub transport: Option<crate::integrator::Transport>,
+    /// Shadow rays per area light per path-traced hit.
+    pub light_samples: Option<u32>,
+    /// Russian roulette start depth; `Some(None)` turns it off.
+    pub rr_start_depth: Option<Option<u32>>,
 }
 
 impl SettingsDesc {
@@ -81,6 +87,15 @@ impl SettingsDesc {
                 .or(under.min_contribution)
                 .unwrap_or(d.min_contribution),
             seed: self.seed.or(under.seed).unwrap_or(d.seed),
+            transport: self.transport.or(under.transport).unwrap_or(d.transport),
+            light_samples: self
+                .light_samples
+                .or(under.light_samples)
+                .unwrap_or(d.light_samples),
+            rr_start_depth: self
+                .rr_start_depth
+                .or(under.rr_start_depth)
+                .unwrap_or(d.rr_start_depth),
         }
     }
 }

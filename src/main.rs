@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use prism::desc::{Geometry, SettingsDesc};
 use prism::error::{Error, Result};
-use prism::integrator::IntegratorKind;
+use prism::integrator::{IntegratorKind, Transport};
 use prism::mesh::BuildQuality;
 use prism::output::{OutputFormat, PngOptions, ToneMap};
 use prism::stats::RenderStats;
@@ -83,6 +83,21 @@ struct RenderArgs {
     /// Integrator.
     #[arg(long, value_enum, default_value_t = IntegratorArg::Recursive)]
     integrator: IntegratorArg,
+    /// Light transport [default: the scene's, else whitted].
+    #[arg(long, value_enum)]
+    transport: Option<TransportArg>,
+    /// Path tracing: shadow rays per area light at each hit
+    /// [default: the scene's, else 1].
+    #[arg(long)]
+    light_samples: Option<u32>,
+    /// Path tracing: bounce from which Russian roulette may end paths
+    /// [default: the scene's, else 3].
+    #[arg(long, value_name = "DEPTH", conflicts_with = "no_russian_roulette")]
+    rr_depth: Option<u32>,
+    /// Path tracing: never end paths by Russian roulette (unbiased either
+    /// way; roulette trades variance for speed).
+    #[arg(long)]
+    no_russian_roulette: bool,
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
@@ -118,6 +133,24 @@ impl From<IntegratorArg> for IntegratorKind {
         match a {
             IntegratorArg::Recursive => IntegratorKind::Recursive,
             IntegratorArg::Wavefront => IntegratorKind::Wavefront,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum TransportArg {
+    /// Whitted: point lights, mirror reflection and refraction.
+    Whitted,
+    /// Path tracing with next-event estimation and MIS; emissive surfaces
+    /// are area lights.
+    Path,
+}
+
+impl From<TransportArg> for Transport {
+    fn from(a: TransportArg) -> Self {
+        match a {
+            TransportArg::Whitted => Transport::Whitted,
+            TransportArg::Path => Transport::Path,
         }
     }
 }
@@ -214,6 +247,13 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         min_contribution: args.min_contribution,
         seed: args.seed,
         exposure: None,
+        transport: args.transport.map(Into::into),
+        light_samples: args.light_samples,
+        rr_start_depth: if args.no_russian_roulette {
+            Some(None)
+        } else {
+            args.rr_depth.map(Some)
+        },
     }
     .resolve(s);
     settings.validate().map_err(|e| {

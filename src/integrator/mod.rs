@@ -27,7 +27,48 @@ pub struct RenderSettings {
     pub min_contribution: f32,
     /// Seed of the sample keys.
     pub seed: u64,
+    /// Light transport: Whitted (point lights, specular bounces) or path
+    /// tracing (area lights, diffuse interreflection).
+    pub transport: Transport,
+    /// Shadow rays per area light at each path-traced hit (next-event
+    /// estimation); more gives smoother soft shadows per sample.
+    pub light_samples: u32,
+    /// Path tracing: bounce from which Russian roulette may end paths
+    /// (`None`: never; paths run to `max_depth`).
+    pub rr_start_depth: Option<u32>,
 }
+
+/// How light is transported: the model, orthogonal to the integrator that
+/// executes it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Transport {
+    /// Whitted: direct light from punctual lights, perfect mirror
+    /// reflection and refraction; emissive surfaces glow but light nothing.
+    #[default]
+    Whitted,
+    /// Unidirectional path tracing with next-event estimation and
+    /// multiple importance sampling: emissive surfaces are area lights,
+    /// diffuse surfaces scatter light onwards.
+    Path,
+}
+
+impl Transport {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Transport::Whitted => "whitted",
+            Transport::Path => "path",
+        }
+    }
+}
+
+/// Default bounce from which Russian roulette may end a path: the first
+/// bounces carry most of the image and are always traced.
+pub const DEFAULT_RR_START_DEPTH: u32 = 3;
+
+/// Largest number of light samples per area light accepted.
+pub const MAX_LIGHT_SAMPLES: u32 = 1024;
 
 impl Default for RenderSettings {
     fn default() -> Self {
@@ -38,6 +79,9 @@ impl Default for RenderSettings {
             max_depth: 8,
             min_contribution: 1e-3,
             seed: 0,
+            transport: Transport::Whitted,
+            light_samples: 1,
+            rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
         }
     }
 }
@@ -87,6 +131,12 @@ impl RenderSettings {
             return Err(format!(
                 "max depth {} exceeds the limit of {MAX_DEPTH_LIMIT}",
                 self.max_depth
+            ));
+        }
+        if self.light_samples == 0 || self.light_samples > MAX_LIGHT_SAMPLES {
+            return Err(format!(
+                "light samples must be between 1 and {MAX_LIGHT_SAMPLES}, got {}",
+                self.light_samples
             ));
         }
         if self.spp == 0 {

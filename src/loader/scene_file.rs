@@ -51,6 +51,24 @@ struct FileSettings {
     seed: Option<u64>,
     exposure: Option<f32>,
     background: Option<[f32; 3]>,
+    transport: Option<FileTransport>,
+    light_samples: Option<u32>,
+    /// Russian roulette start depth; `false` turns it off.
+    russian_roulette: Option<FileRoulette>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileTransport {
+    Whitted,
+    Path,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum FileRoulette {
+    Enabled(bool),
+    StartDepth(u32),
 }
 
 #[derive(Deserialize)]
@@ -409,6 +427,16 @@ impl Ctx<'_> {
             min_contribution: s.min_contribution,
             seed: s.seed,
             exposure: s.exposure,
+            transport: s.transport.map(|t| match t {
+                FileTransport::Whitted => crate::integrator::Transport::Whitted,
+                FileTransport::Path => crate::integrator::Transport::Path,
+            }),
+            light_samples: s.light_samples,
+            rr_start_depth: s.russian_roulette.map(|r| match r {
+                FileRoulette::Enabled(true) => Some(crate::integrator::DEFAULT_RR_START_DEPTH),
+                FileRoulette::Enabled(false) => None,
+                FileRoulette::StartDepth(d) => Some(d),
+            }),
         })
     }
 
