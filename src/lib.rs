@@ -24,6 +24,7 @@
 
 pub mod camera;
 pub mod desc;
+pub mod emitters;
 pub mod error;
 pub mod film;
 pub mod integrator;
@@ -35,6 +36,7 @@ pub mod mesh;
 pub mod optics;
 pub mod output;
 pub mod packet;
+pub mod path;
 pub mod procedural;
 pub mod queues;
 pub mod rng;

@@ -31,6 +31,9 @@ pub struct RayItem {
     pub path: u32,
     /// Bounces so far (0 for camera rays).
     pub depth: u32,
+    /// Path tracing: density with which the direction was drawn (zero for
+    /// camera rays and specular lobes, and unused by Whitted transport).
+    pub pdf: f32,
 }
 
 /// Rays to trace, by field.
@@ -46,6 +49,8 @@ pub struct RayQueue {
     pub path: Vec<u32>,
     /// Bounce depths.
     pub depth: Vec<u32>,
+    /// Direction densities (path tracing).
+    pub pdf: Vec<f32>,
 }
 
 impl RayQueue {
@@ -66,6 +71,7 @@ impl RayQueue {
         self.throughput.clear();
         self.path.clear();
         self.depth.clear();
+        self.pdf.clear();
     }
 
     /// Appends a ray.
@@ -84,6 +90,7 @@ impl RayQueue {
         self.throughput.push(item.throughput);
         self.path.push(item.path);
         self.depth.push(item.depth);
+        self.pdf.push(item.pdf);
     }
 
     /// Appends every ray of `other`, in order.
@@ -93,6 +100,7 @@ impl RayQueue {
         self.throughput.extend_from_slice(&other.throughput);
         self.path.extend_from_slice(&other.path);
         self.depth.extend_from_slice(&other.depth);
+        self.pdf.extend_from_slice(&other.pdf);
     }
 
     /// The ray at `i`.
@@ -109,6 +117,7 @@ impl RayQueue {
             throughput: self.throughput[i],
             path: self.path[i],
             depth: self.depth[i],
+            pdf: self.pdf[i],
         }
     }
 }
@@ -120,6 +129,7 @@ impl QueueBytes for RayQueue {
             + vec_bytes(&self.throughput)
             + vec_bytes(&self.path)
             + vec_bytes(&self.depth)
+            + vec_bytes(&self.pdf)
     }
 }
 
@@ -144,36 +154,45 @@ pub struct HitItem {
     pub path: u32,
     /// Bounce depth of the ray that hit.
     pub depth: u32,
+    /// Instance hit.
+    pub instance: u32,
+    /// Length of the ray segment to the hit.
+    pub distance: f32,
+    /// Density of the ray's direction (path tracing; see [`RayItem::pdf`]).
+    pub pdf: f32,
 }
 
 impl HitItem {
-    /// Queues `hit`, found by a ray along `direction` on path `path`.
+    /// Queues `hit`, found by `ray` (whose direction is unit).
     #[inline]
-    pub fn new(hit: &Hit, direction: Vec3A, throughput: Color, path: u32, depth: u32) -> Self {
+    pub fn new(hit: &Hit, ray: &RayItem) -> Self {
         Self {
-            direction,
+            direction: ray.ray.direction,
             point: hit.point,
             geometric_normal: hit.geometric_normal,
             shading_normal: hit.shading_normal,
             uv: hit.uv,
             material: hit.material,
-            throughput,
-            path,
-            depth,
+            throughput: ray.throughput,
+            path: ray.path,
+            depth: ray.depth,
+            instance: hit.instance,
+            distance: hit.t * ray.ray.direction.length(),
+            pdf: ray.pdf,
         }
     }
 
-    /// The surface point as a [`Hit`] for shading (the queue keeps neither
-    /// the distance nor the instance, which shading does not need).
+    /// The surface point as a [`Hit`] for shading (`t` is the distance
+    /// along the unit direction).
     #[inline]
     pub fn hit(&self) -> Hit {
         Hit {
-            t: 0.0,
+            t: self.distance,
             point: self.point,
             geometric_normal: self.geometric_normal,
             shading_normal: self.shading_normal,
             uv: self.uv,
-            instance: 0,
+            instance: self.instance,
             material: self.material,
         }
     }
@@ -198,6 +217,12 @@ pub struct HitQueue {
     pub throughput: Vec<Color>,
     /// Path indices.
     pub path: Vec<u32>,
+    /// Instances hit.
+    pub instance: Vec<u32>,
+    /// Segment lengths.
+    pub distance: Vec<f32>,
+    /// Direction densities.
+    pub pdf: Vec<f32>,
     /// Bounce depths.
     pub depth: Vec<u32>,
 }
@@ -224,6 +249,9 @@ impl HitQueue {
         self.throughput.clear();
         self.path.clear();
         self.depth.clear();
+        self.instance.clear();
+        self.distance.clear();
+        self.pdf.clear();
     }
 
     /// Appends a hit.
@@ -242,6 +270,9 @@ impl HitQueue {
         self.throughput.push(item.throughput);
         self.path.push(item.path);
         self.depth.push(item.depth);
+        self.instance.push(item.instance);
+        self.distance.push(item.distance);
+        self.pdf.push(item.pdf);
     }
 
     /// Appends every hit of `other`, in order.
@@ -256,6 +287,9 @@ impl HitQueue {
         self.throughput.extend_from_slice(&other.throughput);
         self.path.extend_from_slice(&other.path);
         self.depth.extend_from_slice(&other.depth);
+        self.instance.extend_from_slice(&other.instance);
+        self.distance.extend_from_slice(&other.distance);
+        self.pdf.extend_from_slice(&other.pdf);
     }
 
     /// The hit at `i`.
@@ -271,6 +305,9 @@ impl HitQueue {
             throughput: self.throughput[i],
             path: self.path[i],
             depth: self.depth[i],
+            instance: self.instance[i],
+            distance: self.distance[i],
+            pdf: self.pdf[i],
         }
     }
 }
@@ -286,6 +323,9 @@ impl QueueBytes for HitQueue {
             + vec_bytes(&self.throughput)
             + vec_bytes(&self.path)
             + vec_bytes(&self.depth)
+            + vec_bytes(&self.instance)
+            + vec_bytes(&self.distance)
+            + vec_bytes(&self.pdf)
     }
 }
 
@@ -437,6 +477,7 @@ mod tests {
             throughput: Color::new(0.5, 0.25, 1.0),
             path: 7,
             depth: 2,
+            pdf: 0.25,
         };
         q.push(item);
         q.push(RayItem { path: 8, ..item });
@@ -444,7 +485,7 @@ mod tests {
         assert_eq!(q.get(0), item);
         assert_eq!(q.get(1).path, 8);
         let bytes = q.bytes();
-        assert!(bytes >= 2 * (16 + 16 + 12 + 4 + 4));
+        assert!(bytes >= 2 * (16 + 16 + 12 + 4 + 4 + 4));
         q.clear();
         assert!(q.is_empty());
         assert_eq!(q.bytes(), bytes, "clearing keeps the allocation");

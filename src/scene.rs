@@ -8,6 +8,7 @@ use std::time::Instant;
 use glam::{Vec2, Vec3A};
 use obvhs::{aabb::Aabb, cwbvh::CwBvh};
 
+use crate::emitters::EmitterTable;
 use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
@@ -127,6 +128,8 @@ pub struct RenderScene {
     pub lights: Vec<WorldLight>,
     /// Radiance of escaped rays.
     pub background: Color,
+    /// Emissive surfaces as area lights, for path tracing.
+    pub emitters: EmitterTable,
     /// Top-level BVH over bounded instances.
     tlas: CwBvh,
     /// Instance index per TLAS leaf slot.
@@ -183,11 +186,13 @@ impl RenderScene {
             .iter()
             .map(|&slot| bounded[slot as usize])
             .collect();
+        let emitters = EmitterTable::build(&instances, &materials);
         Self {
             instances,
             materials,
             lights,
             background,
+            emitters,
             tlas,
             tlas_instances,
             unbounded,

@@ -266,6 +266,7 @@ pub fn shade_class_system<const C: u8>(
     mut stats: ResMut<WavefrontStats>,
 ) {
     let class = class_from_u8(C);
+    let first = frame.batches[frame.batch].0;
     let stats = &mut stats.0;
     timed(&mut stats.stages.shade, || {
         let queue = &mut hits.0.queues[C as usize];
@@ -273,6 +274,7 @@ pub fn shade_class_system<const C: u8>(
             class,
             &frame.scene,
             &config.settings,
+            first,
             queue,
             &mut scratch.shading,
             &mut radiance.0,

@@ -28,6 +28,9 @@ use glam::{DVec3, Quat, Vec3, Vec3A};
 use prism::math::Ray;
 use prism::mesh::{BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
 
+/// Each edge (sorted vertex pair) with the triangles that share it.
+type EdgeTriangles = Vec<([u32; 2], Vec<usize>)>;
+
 const EPS: f64 = f32::EPSILON as f64;
 
 /// Depth (in EPS * scale) beyond which a ray must hit; see the module
@@ -102,7 +105,7 @@ impl Solid {
     /// Edges (sorted vertex pairs) with the triangles that share them, and
     /// the triangles around each vertex. Panics unless every edge is shared
     /// by exactly two triangles (a closed, manifold mesh).
-    fn adjacency(&self) -> (Vec<([u32; 2], Vec<usize>)>, Vec<Vec<usize>>) {
+    fn adjacency(&self) -> (EdgeTriangles, Vec<Vec<usize>>) {
         let mut edges: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
         let mut around = vec![Vec::new(); self.positions.len()];
         for (i, t) in self.indices.iter().enumerate() {

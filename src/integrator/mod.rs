@@ -20,7 +20,9 @@ pub struct RenderSettings {
     /// Samples per pixel, at least 1. One sample goes through the pixel
     /// centre; more are jittered uniformly over the pixel (box filter).
     pub spp: u32,
-    /// Maximum number of specular bounces after the camera ray.
+    /// Maximum number of bounces after the camera ray: specular ones under
+    /// Whitted transport; any under path transport, where the last vertex
+    /// still gathers direct light but scatters no further.
     pub max_depth: u32,
     /// Secondary rays whose throughput (largest channel) falls below this
     /// are not traced.

@@ -1,11 +1,14 @@
-//! The recursive Whitted tracer: depth-first, one ray at a time.
+//! The recursive tracer: depth-first, one ray at a time. Whitted
+//! transport recurses into each specular ray; path transport follows one
+//! ray per bounce in a loop.
 
 use rayon::prelude::*;
 
-use super::{Progress, RenderSettings, accumulate, camera_rays, film_sample};
+use super::{Progress, RenderSettings, Transport, accumulate, camera_rays, film_sample};
 use crate::camera::Camera;
 use crate::film::Film;
 use crate::math::{Color, Ray, max_component};
+use crate::path::{self, LobeChoice};
 use crate::rng::Sampler;
 use crate::scene::RenderScene;
 use crate::shading::{Interaction, RayKind, direct_light, scatter};
@@ -54,6 +57,52 @@ pub fn trace(
     radiance
 }
 
+/// Radiance along a camera ray by path tracing: a loop, one vertex per
+/// bounce, with next-event estimation at every vertex and multiple
+/// importance sampling of emission found by scattered rays.
+pub fn trace_path(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    sampler: &mut Sampler,
+    counters: &mut RenderCounters,
+) -> Color {
+    let mut radiance = Color::ZERO;
+    let mut throughput = Color::ONE;
+    let mut ray = *camera_ray;
+    let mut prev_pdf = 0.0;
+    let mut depth = 0;
+    loop {
+        let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
+            radiance += throughput * scene.background;
+            return radiance;
+        };
+        let it = Interaction::new(scene, &ray, &hit);
+        let distance = hit.t * ray.direction.length();
+        radiance +=
+            throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        let lobes = LobeChoice::new(&it);
+        path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
+            counters.rays.shadow += 1;
+            if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                radiance += throughput * q.radiance;
+            }
+        });
+        let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
+            return radiance;
+        };
+        match c.sample.kind {
+            RayKind::Reflection => counters.rays.reflection += 1,
+            RayKind::Refraction => counters.rays.refraction += 1,
+            RayKind::Camera => counters.rays.camera += 1,
+        }
+        throughput = throughput * c.sample.weight * c.scale;
+        ray = c.sample.ray;
+        prev_pdf = c.sample.pdf;
+        depth += 1;
+    }
+}
+
 /// Renders every pixel with the recursive tracer, rows in parallel.
 pub fn render(
     scene: &RenderScene,
@@ -79,7 +128,14 @@ pub fn render(
                     let p = film_sample(x as u32, y as u32, settings.spp, &mut sampler);
                     let ray = cam.ray(p);
                     counters.rays.camera += 1;
-                    let l = trace(scene, settings, &ray, 0, Color::ONE, &mut counters);
+                    let l = match settings.transport {
+                        Transport::Whitted => {
+                            trace(scene, settings, &ray, 0, Color::ONE, &mut counters)
+                        }
+                        Transport::Path => {
+                            trace_path(scene, settings, &ray, &mut sampler, &mut counters)
+                        }
+                    };
                     accumulate(&mut sum, &mut valid, l, &mut counters);
                 }
                 *px = if valid > 0 {

@@ -18,13 +18,14 @@
 
 use rayon::prelude::*;
 
-use super::{RenderSettings, accumulate, film_sample};
+use super::{RenderSettings, Transport, accumulate, film_sample};
 use crate::camera::CameraRays;
 use crate::film::Film;
 use crate::material::MaterialClass;
 use crate::math::Ray;
 use crate::math::{Color, max_component};
 use crate::packet::LANES;
+use crate::path::{self, LobeChoice};
 use crate::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
 };
@@ -133,6 +134,7 @@ pub fn generate_camera_rays(
             throughput: Color::ONE,
             path: local as u32,
             depth: 0,
+            pdf: 0.0,
         });
     }
     rays.camera += count as u64;
@@ -186,23 +188,16 @@ pub fn intersect_closest(
                         scene.intersect_packet(&packet[..n], &mut found);
                     }
                 }
-                let (path, throughput, depth) = (rays.path[i], rays.throughput[i], rays.depth[i]);
                 let hit = if coherent {
                     found[lane]
                 } else {
                     scene.intersect(&rays.ray(i), 0.0, f32::INFINITY)
                 };
                 match hit {
-                    None => esc.push(path, throughput),
+                    None => esc.push(rays.path[i], rays.throughput[i]),
                     Some(h) => {
                         let class = classes[h.material as usize];
-                        local.queues[class as usize].push(HitItem::new(
-                            &h,
-                            rays.direction[i],
-                            throughput,
-                            path,
-                            depth,
-                        ));
+                        local.queues[class as usize].push(HitItem::new(&h, &rays.get(i)));
                     }
                 }
             }
@@ -313,6 +308,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                             throughput: t,
                             path: h.path,
                             depth: h.depth + 1,
+                            pdf: 0.0,
                         };
                         match s.kind {
                             RayKind::Refraction => {
@@ -341,12 +337,14 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     }
 }
 
-/// Shades the hits of `class` with the kernel for that class.
+/// Shades the hits of `class` with the kernel for that class and the
+/// settings' transport; `first` is the batch's first path.
 #[allow(clippy::too_many_arguments)]
 pub fn shade_class(
     class: MaterialClass,
     scene: &RenderScene,
     settings: &RenderSettings,
+    first: u64,
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     radiance: &mut [Color],
@@ -354,6 +352,17 @@ pub fn shade_class(
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
+    if settings.transport == Transport::Path {
+        // Every lit class also scatters diffusely under path transport.
+        let f = match class {
+            MaterialClass::Emissive => shade_path::<false, false>,
+            MaterialClass::Diffuse | MaterialClass::General => shade_path::<true, true>,
+            MaterialClass::Mirror | MaterialClass::Glass => shade_path::<false, true>,
+        };
+        return f(
+            scene, settings, first, hits, scratch, radiance, shadows, next, rays,
+        );
+    }
     let f = match class {
         MaterialClass::Emissive => shade::<false, false>,
         MaterialClass::Diffuse => shade::<true, false>,
@@ -363,6 +372,99 @@ pub fn shade_class(
     f(
         scene, settings, hits, scratch, radiance, shadows, next, rays,
     )
+}
+
+/// Stage, path transport: shades every hit of one material class. Each
+/// hit adds its MIS-weighted emission, pushes next-event shadow rays
+/// (`NEE`: the class has a lobe lights can reach) and at most one
+/// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
+/// from the same sample numbers.
+#[allow(clippy::too_many_arguments)]
+pub fn shade_path<const NEE: bool, const SCATTER: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    first: u64,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    radiance: &mut [Color],
+    shadows: &mut ShadowQueue,
+    next: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    let chunks = hits.len().div_ceil(CHUNK);
+    let spp = settings.spp as u64;
+    chunk_buffers(scratch, hits.len())
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(c, out)| {
+            out.clear();
+            let end = ((c + 1) * CHUNK).min(hits.len());
+            for i in c * CHUNK..end {
+                let h = hits.get(i);
+                let hit = h.hit();
+                let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &hit);
+                let e = path::emitted(scene, settings, &it, h.instance, h.pdf, h.distance);
+                if e != Color::ZERO {
+                    out.emitted.push((h.path, h.throughput * e));
+                }
+                if !NEE && !SCATTER {
+                    continue;
+                }
+                let p = first + h.path as u64;
+                let mut sampler = Sampler::new(settings.seed, (p / spp) as u32, (p % spp) as u32);
+                let lobes = LobeChoice::new(&it);
+                if NEE {
+                    path::next_event(scene, settings, &it, &lobes, &mut sampler, h.depth, |q| {
+                        out.counts.shadow += 1;
+                        out.shadows.push(ShadowItem {
+                            ray: q.ray,
+                            t_max: q.t_max,
+                            radiance: h.throughput * q.radiance,
+                            path: h.path,
+                        });
+                    });
+                }
+                if SCATTER
+                    && let Some(cont) = path::continue_path(
+                        settings,
+                        &it,
+                        &lobes,
+                        h.depth,
+                        h.throughput,
+                        &mut sampler,
+                    )
+                {
+                    let item = RayItem {
+                        ray: cont.sample.ray,
+                        throughput: h.throughput * cont.sample.weight * cont.scale,
+                        path: h.path,
+                        depth: h.depth + 1,
+                        pdf: cont.sample.pdf,
+                    };
+                    match cont.sample.kind {
+                        RayKind::Refraction => {
+                            out.counts.refraction += 1;
+                            out.refractions.push(item);
+                        }
+                        RayKind::Reflection | RayKind::Camera => {
+                            out.counts.reflection += 1;
+                            out.reflections.push(item);
+                        }
+                    }
+                }
+            }
+        });
+    for out in &scratch[..chunks] {
+        for &(path, l) in &out.emitted {
+            radiance[path as usize] += l;
+        }
+        shadows.append(&out.shadows);
+        next.append(&out.reflections);
+        rays.add(&out.counts);
+    }
+    for out in &scratch[..chunks] {
+        next.append(&out.refractions);
+    }
 }
 
 /// Reusable buffers of [`trace_shadow_rays`].
