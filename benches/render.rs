@@ -1,7 +1,9 @@
 //! Criterion benchmarks of whole frames, through the ECS stages, for both
 //! integrators on the same scenes and the same image.
 //!
-//! `cargo bench --bench render`. Each scene is loaded and spawned once;
+//! `cargo bench --bench render`. The `stage_gating` groups compare the
+//! wavefront's feature-gated schedule with one forced to run every stage.
+//! Each scene is loaded and spawned once;
 //! every iteration runs one frame (extraction, top-level BVH, rendering)
 //! at 320x240, one sample per pixel. Throughput is in camera rays
 //! (pixels) per second; `prism bench` reports rays of every kind.
@@ -66,5 +68,33 @@ fn bench_scenes(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench_scenes);
+/// Stage gating: the wavefront on a diffuse-only scene with its stages
+/// gated by the scene's features, against the same schedule forced to run
+/// every stage (the extra stages find empty queues).
+fn bench_stage_gating(c: &mut Criterion) {
+    use prism::integrator::Transport;
+    use prism::systems::wavefront::StageGating;
+    for transport in [Transport::Whitted, Transport::Path] {
+        let mut group = c.benchmark_group(format!("stage_gating/{}", transport.name()));
+        group.sample_size(20);
+        let (mut world, mut schedule) = prepare("bench/diffuse_only.toml");
+        {
+            let mut config = world.resource_mut::<RenderConfig>();
+            config.integrator = IntegratorKind::Wavefront;
+            config.settings.transport = transport;
+        }
+        for (name, force_all) in [("gated", false), ("every_stage", true)] {
+            world.insert_resource(StageGating { force_all });
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    schedule.run(&mut world);
+                    assert!(world.resource::<Frame>().film.is_some());
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bench_scenes, bench_stage_gating);
 criterion_main!(benches);

@@ -26,6 +26,7 @@ pub mod camera;
 pub mod desc;
 pub mod emitters;
 pub mod error;
+pub mod features;
 pub mod film;
 pub mod integrator;
 pub mod light;

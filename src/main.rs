@@ -319,6 +319,11 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         .scene
         .as_ref()
         .map_or((0, 0), |s| (s.triangle_count(), s.instances.len()));
+    let features = accel
+        .scene
+        .as_ref()
+        .map(|s| prism::features::SceneFeatures::of(s))
+        .unwrap_or_default();
     let frame = world.resource::<Frame>();
     if let Some(e) = &frame.error {
         return Err(Error::Invalid(format!("{}: {e}", args.scene.display())));
@@ -333,6 +338,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let stats = RenderStats {
         scene: args.scene.display().to_string(),
         integrator: IntegratorKind::from(args.integrator).name().into(),
+        transport: settings.transport.name().into(),
+        features,
         wall_seconds: wall.elapsed().as_secs_f64(),
         load_seconds,
         bvh_build_seconds: mesh_build_seconds + tlas_seconds,
@@ -353,6 +360,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             peak_queue_bytes: w.peak_queue_bytes,
             batches: w.batches,
             batch_paths: world.resource::<systems::wavefront::BatchSize>().0,
+            stages_run: w.runs.names_run(),
+            stage_runs: w.runs,
         }),
     };
     if let Some(path) = &args.stats {

@@ -69,6 +69,10 @@ pub struct RenderStats {
     pub scene: String,
     /// Integrator name.
     pub integrator: String,
+    /// Light transport name.
+    pub transport: String,
+    /// What the scene contains, which decides the stages that run.
+    pub features: crate::features::SceneFeatures,
     /// Whole run, from start to written image.
     pub wall_seconds: f64,
     /// Reading and parsing scene files, building mesh BVHs included.
@@ -115,6 +119,10 @@ pub struct WavefrontStatsJson {
     pub batches: usize,
     /// Paths per batch.
     pub batch_paths: usize,
+    /// The stage systems that ran (stages the scene does not need do not).
+    pub stages_run: Vec<&'static str>,
+    /// Runs of each stage system.
+    pub stage_runs: crate::integrator::wavefront::StageRuns,
 }
 
 impl From<RayCounts> for RayCountsJson {

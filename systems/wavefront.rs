@@ -20,6 +20,7 @@ use bevy_ecs::schedule::ScheduleLabel;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::camera::CameraRays;
+use crate::features::SceneFeatures;
 use crate::integrator::wavefront::{
     self as kernels, ClassQueues, PixelSums, RoutingScratch, ShadeScratch, ShadowScratch,
     StageSeconds, WavefrontReport,
@@ -92,6 +93,19 @@ pub struct StageScratch {
     shadows: ShadowScratch,
 }
 
+impl StageScratch {
+    /// Bytes the shading stages hold for reflection and refraction rays:
+    /// zero when no stage ever pushed one.
+    pub fn secondary_bytes(&self) -> usize {
+        self.shading.iter().map(|s| s.secondary_bytes()).sum()
+    }
+
+    /// Bytes the shading stages hold for refraction rays.
+    pub fn refraction_bytes(&self) -> usize {
+        self.shading.iter().map(|s| s.refraction_bytes()).sum()
+    }
+}
+
 /// What stays fixed during a frame: the scene, the camera rays, the
 /// material classes, the batches, and which batch is running.
 #[derive(Resource)]
@@ -106,9 +120,12 @@ pub struct WavefrontFrame {
     pub batches: Vec<(u64, usize)>,
     /// Index of the running batch.
     pub batch: usize,
-    /// Which classes have any material in the scene (their shading
-    /// systems run only then).
-    pub present: [bool; 5],
+    /// What the scene contains: shading systems run only for the classes
+    /// present, shadow rays only when something can be lit.
+    pub features: SceneFeatures,
+    /// Whether shadow rays can occur (see
+    /// [`SceneFeatures::needs_shadow_rays`]).
+    pub shadows: bool,
 }
 
 /// Counters and timings of the frame.
@@ -118,6 +135,15 @@ pub struct WavefrontStats(pub WavefrontReport);
 /// Number of paths per batch.
 #[derive(Resource, Clone, Copy, Debug)]
 pub struct BatchSize(pub usize);
+
+/// Stage gating: by default a stage runs only when the scene has its
+/// feature; `force_all` runs every stage (with empty queues where nothing
+/// feeds them), to measure what gating saves.
+#[derive(Resource, Clone, Copy, Debug, Default)]
+pub struct StageGating {
+    /// Run every stage whatever the scene contains.
+    pub force_all: bool,
+}
 
 impl Default for BatchSize {
     fn default() -> Self {
@@ -164,7 +190,9 @@ pub fn add_wavefront_schedules(world: &mut World) {
         )
             .chain()
             .in_set(WavefrontSystems::ShadeMaterials),
-        trace_shadow_rays.in_set(WavefrontSystems::TraceShadowRays),
+        trace_shadow_rays
+            .run_if(shadows_possible)
+            .in_set(WavefrontSystems::TraceShadowRays),
         advance_bounce.in_set(WavefrontSystems::AdvanceBounce),
     ));
 
@@ -184,6 +212,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<StageScratch>();
     world.init_resource::<WavefrontStats>();
     world.init_resource::<BatchSize>();
+    world.init_resource::<StageGating>();
 }
 
 fn class_from_u8(c: u8) -> MaterialClass {
@@ -191,8 +220,13 @@ fn class_from_u8(c: u8) -> MaterialClass {
 }
 
 /// Run condition: the scene has a material of class `C`.
-pub fn class_present<const C: u8>(frame: Res<WavefrontFrame>) -> bool {
-    frame.present[C as usize]
+pub fn class_present<const C: u8>(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
+    gating.force_all || frame.features.classes[C as usize]
+}
+
+/// Run condition: the scene can produce shadow rays.
+pub fn shadows_possible(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
+    gating.force_all || frame.shadows
 }
 
 /// Stage: camera rays for the batch's paths.
@@ -205,6 +239,7 @@ pub fn generate_camera_rays(
 ) {
     let (first, count) = frame.batches[frame.batch];
     let stats = &mut stats.0;
+    stats.runs.generate_camera_rays += 1;
     timed(&mut stats.stages.generate_camera_rays, || {
         radiance.0.clear();
         radiance.0.resize(count, Color::ZERO);
@@ -228,6 +263,7 @@ pub fn intersect_closest(
     mut hits: ResMut<HitQueues>,
     mut stats: ResMut<WavefrontStats>,
 ) {
+    stats.0.runs.intersect_closest += 1;
     timed(&mut stats.0.stages.intersect_closest, || {
         kernels::intersect_closest(
             &frame.scene,
@@ -247,6 +283,7 @@ pub fn handle_escaped_rays(
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
+    stats.0.runs.handle_escaped_rays += 1;
     timed(&mut stats.0.stages.handle_escaped_rays, || {
         kernels::handle_escaped_rays(&escaped.0, frame.scene.background, &mut radiance.0);
         escaped.0.clear();
@@ -268,6 +305,7 @@ pub fn shade_class_system<const C: u8>(
     let class = class_from_u8(C);
     let first = frame.batches[frame.batch].0;
     let stats = &mut stats.0;
+    *stats.runs.shade_mut(class) += 1;
     timed(&mut stats.stages.shade, || {
         let queue = &mut hits.0.queues[C as usize];
         kernels::shade_class(
@@ -294,6 +332,7 @@ pub fn trace_shadow_rays(
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
+    stats.0.runs.trace_shadow_rays += 1;
     timed(&mut stats.0.stages.trace_shadow_rays, || {
         kernels::trace_shadow_rays(
             &frame.scene,
@@ -331,6 +370,7 @@ pub fn advance_bounce(
         + scratch.shading.iter().map(|s| s.bytes()).sum::<usize>()
         + radiance.0.capacity() * std::mem::size_of::<Color>();
     stats.0.peak_queue_bytes = stats.0.peak_queue_bytes.max(bytes);
+    debug_assert!(shadows.0.is_empty(), "shadow rays left untraced");
     std::mem::swap(&mut rays.0, &mut next.0);
     next.0.clear();
 }
@@ -345,6 +385,7 @@ pub fn update_film(
 ) {
     let (first, _) = frame.batches[frame.batch];
     let stats = &mut stats.0;
+    stats.runs.update_film += 1;
     timed(&mut stats.stages.update_film, || {
         kernels::update_film(
             &radiance.0,
@@ -365,10 +406,8 @@ pub fn render_wavefront(world: &mut World) {
     let config = world.resource::<RenderConfig>().clone();
     let settings = &config.settings;
     let classes: Vec<MaterialClass> = scene.materials.iter().map(|m| m.class()).collect();
-    let mut present = [false; 5];
-    for c in &classes {
-        present[*c as usize] = true;
-    }
+    let features = SceneFeatures::of(&scene);
+    let shadows = features.needs_shadow_rays(settings.transport);
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = kernels::batch_ranges(settings, batch_size).collect();
     let pixel_count = settings.width as usize * settings.height as usize;
@@ -378,7 +417,8 @@ pub fn render_wavefront(world: &mut World) {
         classes,
         batches: batches.clone(),
         batch: 0,
-        present,
+        features,
+        shadows,
     });
     world.insert_resource(PixelAccumulator(PixelSums::new(pixel_count)));
     world.insert_resource(WavefrontStats::default());

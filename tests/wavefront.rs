@@ -210,17 +210,16 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::Temp
         .clone();
     let config = world.resource::<RenderConfig>().settings.clone();
     let classes: Vec<MaterialClass> = scene.materials.iter().map(|m| m.class()).collect();
-    let mut present = [false; 5];
-    for c in &classes {
-        present[*c as usize] = true;
-    }
+    let features = prism::features::SceneFeatures::of(&scene);
+    let shadows = features.needs_shadow_rays(config.transport);
     world.insert_resource(WavefrontFrame {
         camera: prism::camera::CameraRays::new(&camera, config.width, config.height),
         batches: prism::integrator::wavefront::batch_ranges(&config, 1 << 20).collect(),
         batch: 0,
         scene,
         classes,
-        present,
+        features,
+        shadows,
     });
     (world, dir)
 }

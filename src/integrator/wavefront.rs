@@ -237,6 +237,16 @@ impl ShadeOutput {
         self.counts = RayCounts::default();
     }
 
+    /// Bytes allocated for reflection and refraction rays.
+    pub fn secondary_bytes(&self) -> usize {
+        self.reflections.bytes() + self.refractions.bytes()
+    }
+
+    /// Bytes allocated for refraction rays.
+    pub fn refraction_bytes(&self) -> usize {
+        self.refractions.bytes()
+    }
+
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         self.emitted.capacity() * std::mem::size_of::<(u32, Color)>()
@@ -556,9 +566,70 @@ pub fn update_film(
     }
 }
 
+/// How many times each stage system ran during a frame: stages a scene
+/// does not need never run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct StageRuns {
+    /// Camera ray generation (once per batch).
+    pub generate_camera_rays: u32,
+    /// Closest-hit traversal (once per bounce).
+    pub intersect_closest: u32,
+    /// Escaped-ray handling.
+    pub handle_escaped_rays: u32,
+    /// Shading of emissive-only materials.
+    pub shade_emissive: u32,
+    /// Shading of diffuse/glossy materials.
+    pub shade_diffuse: u32,
+    /// Shading of mirrors (the reflection stage).
+    pub shade_mirror: u32,
+    /// Shading of glass (the refraction stage).
+    pub shade_glass: u32,
+    /// Shading of materials with several lobes.
+    pub shade_general: u32,
+    /// Shadow-ray tracing.
+    pub trace_shadow_rays: u32,
+    /// Film update (once per batch).
+    pub update_film: u32,
+}
+
+impl StageRuns {
+    /// The shading counter of `class`.
+    pub fn shade_mut(&mut self, class: MaterialClass) -> &mut u32 {
+        match class {
+            MaterialClass::Emissive => &mut self.shade_emissive,
+            MaterialClass::Diffuse => &mut self.shade_diffuse,
+            MaterialClass::Mirror => &mut self.shade_mirror,
+            MaterialClass::Glass => &mut self.shade_glass,
+            MaterialClass::General => &mut self.shade_general,
+        }
+    }
+
+    /// Names of the stages that ran at least once, in stage order.
+    pub fn names_run(&self) -> Vec<&'static str> {
+        [
+            ("generate_camera_rays", self.generate_camera_rays),
+            ("intersect_closest", self.intersect_closest),
+            ("handle_escaped_rays", self.handle_escaped_rays),
+            ("shade_emissive", self.shade_emissive),
+            ("shade_diffuse", self.shade_diffuse),
+            ("shade_mirror", self.shade_mirror),
+            ("shade_glass", self.shade_glass),
+            ("shade_general", self.shade_general),
+            ("trace_shadow_rays", self.trace_shadow_rays),
+            ("update_film", self.update_film),
+        ]
+        .into_iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(name, _)| name)
+        .collect()
+    }
+}
+
 /// Everything the wavefront reports beyond the image.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WavefrontReport {
+    /// Runs of each stage system.
+    pub runs: StageRuns,
     /// Rays and dropped samples.
     pub counters: RenderCounters,
     /// Time per stage.

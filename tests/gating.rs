@@ -1,0 +1,183 @@
+//! Only the stages a scene needs: stage systems gated by the scene's
+//! features, queues for absent features never allocated, no triangle BVH
+//! for a scene without meshes.
+//!
+//! No test in this file loads a mesh, so the process-wide count of
+//! triangle BVH builds is this file's own.
+
+use bevy_ecs::prelude::*;
+use prism::integrator::wavefront::StageRuns;
+use prism::integrator::{IntegratorKind, RenderSettings, Transport};
+use prism::material::MaterialClass;
+use prism::mesh::BuildQuality;
+use prism::queues::QueueBytes;
+use prism::systems::wavefront::{HitQueues, ShadowRays, StageGating, StageScratch};
+use prism::systems::{self, Frame, RenderConfig};
+
+/// Spheres and a disk, all Lambertian, one point light.
+const DIFFUSE_ONLY: &str = r#"
+[camera]
+look_from = [0, 1, 6]
+look_at = [0, 0.5, 0]
+[[objects]]
+shape = { type = "sphere", radius = 1.0 }
+material = { color = 0.7 }
+[[objects]]
+shape = { type = "sphere", radius = 0.4 }
+translate = [1.5, 0.4, 0]
+material = { color = [0.2, 0.6, 0.3] }
+[[objects]]
+shape = { type = "disk", radius = 3.0 }
+material = { color = 0.5 }
+[[lights]]
+type = "point"
+position = [2, 4, 3]
+intensity = 30
+"#;
+
+/// Renders `toml` with the wavefront integrator and returns the world
+/// after the frame, with its queues and scratch buffers as they were left.
+fn wavefront_world(toml: &str, transport: Transport, force_all: bool) -> World {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    let desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+    let mut world = World::new();
+    let mut schedule = systems::setup(&mut world);
+    let cameras = systems::spawn_scene(&mut world, desc);
+    world.insert_resource(StageGating { force_all });
+    world.insert_resource(RenderConfig {
+        settings: RenderSettings {
+            width: 32,
+            height: 24,
+            spp: 2,
+            max_depth: 4,
+            transport,
+            ..Default::default()
+        },
+        integrator: IntegratorKind::Wavefront,
+        camera: Some(cameras[0]),
+        ..Default::default()
+    });
+    schedule.run(&mut world);
+    assert!(world.resource::<Frame>().film.is_some());
+    world
+}
+
+fn runs(world: &World) -> StageRuns {
+    world.resource::<Frame>().wavefront.unwrap().runs
+}
+
+#[test]
+fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
+    for transport in [Transport::Whitted, Transport::Path] {
+        let world = wavefront_world(DIFFUSE_ONLY, transport, false);
+        let r = runs(&world);
+        assert_eq!(r.shade_mirror, 0, "{transport:?}");
+        assert_eq!(r.shade_glass, 0, "{transport:?}");
+        assert_eq!(r.shade_general, 0, "{transport:?}");
+        assert_eq!(r.shade_emissive, 0, "{transport:?}");
+        assert!(r.shade_diffuse > 0 && r.trace_shadow_rays > 0, "{r:?}");
+        assert_eq!(
+            world
+                .resource::<Frame>()
+                .wavefront
+                .unwrap()
+                .runs
+                .names_run(),
+            [
+                "generate_camera_rays",
+                "intersect_closest",
+                "handle_escaped_rays",
+                "shade_diffuse",
+                "trace_shadow_rays",
+                "update_film"
+            ]
+        );
+        // The hit queues of the absent classes were never allocated.
+        let hits = &world.resource::<HitQueues>().0;
+        for class in [
+            MaterialClass::Mirror,
+            MaterialClass::Glass,
+            MaterialClass::General,
+            MaterialClass::Emissive,
+        ] {
+            assert_eq!(hits.get(class).bytes(), 0, "{class:?}");
+        }
+        assert!(hits.get(MaterialClass::Diffuse).bytes() > 0);
+        let scratch = world.resource::<StageScratch>();
+        // No refraction queue ever; under Whitted transport no secondary
+        // ray queue at all (diffuse surfaces spawn none), so one bounce.
+        assert_eq!(scratch.refraction_bytes(), 0, "{transport:?}");
+        if transport == Transport::Whitted {
+            assert_eq!(scratch.secondary_bytes(), 0);
+            assert_eq!(r.intersect_closest, r.generate_camera_rays);
+        } else {
+            assert!(r.intersect_closest > r.generate_camera_rays);
+        }
+    }
+}
+
+#[test]
+fn forcing_every_stage_runs_them_all_and_changes_nothing() {
+    let gated = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, false);
+    let forced = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, true);
+    let r = runs(&forced);
+    assert!(r.shade_mirror > 0 && r.shade_glass > 0 && r.shade_emissive > 0 && r.shade_general > 0);
+    let a = gated.resource::<Frame>().film.as_ref().unwrap();
+    let b = forced.resource::<Frame>().film.as_ref().unwrap();
+    assert!(a.pixels == b.pixels);
+}
+
+#[test]
+fn a_scene_without_lights_traces_no_shadow_rays() {
+    let unlit = DIFFUSE_ONLY.replace(
+        "[[lights]]\ntype = \"point\"\nposition = [2, 4, 3]\nintensity = 30\n",
+        "",
+    );
+    assert!(!unlit.contains("[[lights]]"));
+    for transport in [Transport::Whitted, Transport::Path] {
+        let world = wavefront_world(&unlit, transport, false);
+        assert_eq!(runs(&world).trace_shadow_rays, 0, "{transport:?}");
+        assert_eq!(world.resource::<ShadowRays>().0.bytes(), 0);
+    }
+    // An emissive sphere lights the scene only under path transport.
+    let glowing = format!(
+        "{unlit}\n[[objects]]\nshape = {{ type = \"sphere\", radius = 0.3 }}\ntranslate = [0, 3, 0]\nmaterial = {{ color = 0.0, diffuse = 0.0, emission = 20 }}\n"
+    );
+    assert_eq!(
+        runs(&wavefront_world(&glowing, Transport::Whitted, false)).trace_shadow_rays,
+        0
+    );
+    assert!(runs(&wavefront_world(&glowing, Transport::Path, false)).trace_shadow_rays > 0);
+}
+
+#[test]
+fn a_sphere_only_scene_builds_no_triangle_bvh() {
+    let before = prism::mesh::triangle_bvh_builds();
+    for transport in [Transport::Whitted, Transport::Path] {
+        let world = wavefront_world(DIFFUSE_ONLY, transport, false);
+        let scene = world
+            .resource::<systems::SceneAccel>()
+            .scene
+            .clone()
+            .unwrap();
+        let features = prism::features::SceneFeatures::of(&scene);
+        assert_eq!(features.mesh_instances, 0, "{transport:?}");
+        assert_eq!(features.shapes, ["disk", "sphere"]);
+    }
+    assert_eq!(prism::mesh::triangle_bvh_builds(), before);
+    // The counter does count: a one-triangle mesh builds one.
+    let _ = prism::mesh::Mesh::new(
+        "triangle",
+        prism::mesh::MeshData {
+            positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+            indices: vec![[0, 1, 2]],
+            ..Default::default()
+        },
+        prism::mesh::NormalMode::Flat,
+        BuildQuality::Fastest,
+    )
+    .unwrap();
+    assert_eq!(prism::mesh::triangle_bvh_builds(), before + 1);
+}
