@@ -45,12 +45,24 @@ pub struct BenchArgs {
     /// Maximum depth [default: the scene's, else 8].
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// Light transport [default: the scene's, else whitted].
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportChoice>,
     /// Paths per wavefront batch.
     #[arg(long, default_value_t = prism::integrator::wavefront::DEFAULT_BATCH_PATHS)]
     pub batch_paths: usize,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Light transport choices on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TransportChoice {
+    /// Whitted transport.
+    Whitted,
+    /// Path tracing.
+    Path,
 }
 
 /// One integrator on one scene.
@@ -150,6 +162,10 @@ fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<Scene
         height: args.height,
         spp: args.spp,
         max_depth: args.max_depth,
+        transport: args.transport.map(|t| match t {
+            TransportChoice::Whitted => prism::integrator::Transport::Whitted,
+            TransportChoice::Path => prism::integrator::Transport::Path,
+        }),
         ..Default::default()
     }
     .resolve(&desc.settings);
