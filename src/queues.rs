@@ -501,6 +501,7 @@ mod tests {
             throughput: Color::ONE,
             path: 0,
             depth: 0,
+            pdf: 0.0,
         });
     }
 
