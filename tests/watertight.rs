@@ -83,6 +83,9 @@ struct Solid {
     radius: f32,
 }
 
+/// Edges with the triangles that share them, and the triangles around each vertex.
+type Adjacency = (Vec<([u32; 2], Vec<usize>)>, Vec<Vec<usize>>);
+
 impl Solid {
     fn mesh(&self) -> Mesh {
         let data = MeshData {
@@ -102,7 +105,7 @@ impl Solid {
     /// Edges (sorted vertex pairs) with the triangles that share them, and
     /// the triangles around each vertex. Panics unless every edge is shared
     /// by exactly two triangles (a closed, manifold mesh).
-    fn adjacency(&self) -> (Vec<([u32; 2], Vec<usize>)>, Vec<Vec<usize>>) {
+    fn adjacency(&self) -> Adjacency {
         let mut edges: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
         let mut around = vec![Vec::new(); self.positions.len()];
         for (i, t) in self.indices.iter().enumerate() {
