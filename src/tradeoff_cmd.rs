@@ -514,11 +514,14 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
             let path = args.out.join("reference.exr");
             prism::output::write_image(&path, &film, &PngOptions::default())?;
             if let Some(b) = &bar {
-                b.println(format!(
-                    "reference: {} spp in {seconds:.2} s -> {}",
-                    args.reference_spp,
-                    path.display()
-                ));
+                // Shown on any stderr, not only on a terminal like the bar.
+                b.suspend(|| {
+                    eprintln!(
+                        "reference: {} spp in {seconds:.2} s -> {}",
+                        args.reference_spp,
+                        path.display()
+                    )
+                });
             }
             film
         }
