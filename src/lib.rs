@@ -34,6 +34,7 @@ pub mod loader;
 pub mod material;
 pub mod math;
 pub mod mesh;
+pub mod metrics;
 pub mod optics;
 pub mod output;
 pub mod packet;

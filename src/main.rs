@@ -25,6 +25,8 @@ struct Cli {
 }
 
 mod bench;
+mod compare_cmd;
+mod tradeoff_cmd;
 
 #[derive(Subcommand, Debug)]
 enum Command {
@@ -35,6 +37,15 @@ enum Command {
     /// memory, wavefront stage times, the speedup, and closest-hit
     /// throughput of single rays and packets.
     Bench(bench::BenchArgs),
+    /// Error metrics (RMSE, relative MSE, FLIP) of a test EXR against a
+    /// reference EXR of the same size.
+    Compare(compare_cmd::CompareArgs),
+    /// Measure speed against accuracy: render a converged reference, sweep
+    /// one knob at a time (spp, depth, contribution threshold, light
+    /// samples, Russian roulette, BVH preset, transport) around a base
+    /// configuration, and write tradeoff.csv and a plot of error against
+    /// render time with the Pareto front.
+    Tradeoff(tradeoff_cmd::TradeoffArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -183,6 +194,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render(args),
         Command::Bench(args) => bench::run(args),
+        Command::Compare(args) => compare_cmd::run(args),
+        Command::Tradeoff(args) => tradeoff_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
