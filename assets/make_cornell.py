@@ -64,12 +64,17 @@ emission = [17.0, 12.0, 4.0]
 # planar); this box squares them: X 0..556, Y 0..548.8, Z 0..559.2.
 X, Y, Z = 556, 548.8, 559.2
 out.append(poly("floor", [(X, 0, 0), (0, 0, 0), (0, 0, Z), (X, 0, Z)], "white", toward=inside))
-out.append(poly("ceiling", [(X, Y, 0), (X, Y, Z), (0, Y, Z), (0, Y, 0)], "white", toward=inside))
+# The ceiling has a hole where the light is, and the light fills it flush:
+# a light hung just below a closed ceiling would light the thin gap above
+# it (emission is two-sided), a trap that paths reach only at grazing
+# angles and that shows up as fireflies.
+LX0, LX1, LZ0, LZ1 = 213, 343, 227, 332
+for k, (x0, x1, z0, z1) in enumerate([(0, X, 0, LZ0), (0, X, LZ1, Z), (0, LX0, LZ0, LZ1), (LX1, X, LZ0, LZ1)]):
+    out.append(poly(f"ceiling {k}", [(x0, Y, z0), (x1, Y, z0), (x1, Y, z1), (x0, Y, z1)], "white", toward=inside))
 out.append(poly("back wall", [(X, 0, Z), (0, 0, Z), (0, Y, Z), (X, Y, Z)], "white", toward=inside))
 out.append(poly("right wall (green)", [(0, 0, Z), (0, 0, 0), (0, Y, 0), (0, Y, Z)], "green", toward=inside))
 out.append(poly("left wall (red)", [(X, 0, 0), (X, 0, Z), (X, Y, Z), (X, Y, 0)], "red", toward=inside))
-# The light hangs a hair below the ceiling, facing down.
-out.append(poly("light", [(343, 548.7, 227), (343, 548.7, 332), (213, 548.7, 332), (213, 548.7, 227)], "light", toward=(278, 0, 280)))
+out.append(poly("light", [(LX1, Y, LZ0), (LX1, Y, LZ1), (LX0, Y, LZ1), (LX0, Y, LZ0)], "light", toward=(278, 0, 280)))
 
 def block(name, top, height):
     c = [sum(p[i] for p in top) / 4 for i in (0, 1)]
