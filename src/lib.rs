@@ -36,12 +36,14 @@ pub mod optics;
 pub mod output;
 pub mod packet;
 pub mod procedural;
+pub mod progressive;
 pub mod queues;
 pub mod rng;
 pub mod scene;
 pub mod shading;
 pub mod shapes;
 pub mod stats;
+pub mod tlas;
 pub mod transform;
 
 #[path = "../systems/mod.rs"]
