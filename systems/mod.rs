@@ -23,6 +23,7 @@
 //! the build short and the binary simple); the kernels in `src/` never
 //! refer to it.
 
+pub mod demo;
 pub mod sync;
 pub mod wavefront;
 
