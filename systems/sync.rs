@@ -267,6 +267,7 @@ pub fn sync_removed(
 
 /// Phase 2: new objects enter the scene (every object after a reset), in
 /// entity order.
+#[allow(clippy::type_complexity)]
 pub fn sync_added(
     mut sync: ResMut<SceneSync>,
     mut accel: ResMut<SceneAccel>,

@@ -41,6 +41,8 @@ fn material_hit(world: &World, ray: &Ray) -> Color {
 #[test]
 fn each_change_does_only_its_own_work() {
     let knots = [knot(2, 3), knot(3, 5)];
+    let built = mesh_bvh_builds();
+    assert!(built >= 2);
     let mut world = World::new();
     let mut schedule = Schedule::default();
     PrismPlugin::new()
@@ -78,6 +80,7 @@ fn each_change_does_only_its_own_work() {
     run_frame(&mut world, &mut schedule);
     let (c0, u0, m0) = counters(&world);
     assert_eq!(u0, TlasUpdate::Rebuilt);
+    assert_eq!(m0, built, "the first frame built a mesh BVH");
     assert_eq!(c0.rebuilds, 1);
     assert_eq!(world.resource::<Frame>().update.added, 20);
 
@@ -172,4 +175,5 @@ fn each_change_does_only_its_own_work() {
     assert_eq!(c4.rebuilds, c3.rebuilds + 1);
     assert_eq!(m4, m3, "a top-level rebuild built a mesh BVH");
     assert_eq!(world.resource::<Frame>().update.moved, 10);
+    assert_eq!(mesh_bvh_builds(), built);
 }
