@@ -102,6 +102,7 @@ impl Solid {
     /// Edges (sorted vertex pairs) with the triangles that share them, and
     /// the triangles around each vertex. Panics unless every edge is shared
     /// by exactly two triangles (a closed, manifold mesh).
+    #[allow(clippy::type_complexity)]
     fn adjacency(&self) -> (Vec<([u32; 2], Vec<usize>)>, Vec<Vec<usize>>) {
         let mut edges: HashMap<[u32; 2], Vec<usize>> = HashMap::new();
         let mut around = vec![Vec::new(); self.positions.len()];
