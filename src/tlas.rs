@@ -52,9 +52,9 @@ pub enum MoveStrategy {
 pub struct TlasPolicy {
     /// How moved leaves are updated.
     pub moves: MoveStrategy,
-    /// Rebuild from scratch when more than this fraction of the bounded
-    /// instances changed (inserted, removed or moved) since the last
-    /// commit. See `benches/frame_loop.rs` (group `tlas_update`) for the
+    /// Rebuild from scratch when more leaves changed (inserted, removed
+    /// or moved) since the last commit than this fraction of the bounded
+    /// instances at the last commit. See `benches/frame_loop.rs` (group `tlas_update`) for the
     /// measurement behind the default.
     pub rebuild_fraction: f32,
     /// Scenes with at most this many bounded instances are always rebuilt:
@@ -133,6 +133,9 @@ pub struct Tlas {
     pub policy: TlasPolicy,
     /// Leaves changed since the last commit.
     changes: usize,
+    /// Bounded instances at the last commit: churn is measured against it
+    /// (so a scene filled from empty is built, not grown leaf by leaf).
+    committed_count: usize,
     /// The Bvh2 changed since the last conversion.
     stale: bool,
     /// Churn passed the threshold: leaf updates are skipped and the next
@@ -207,6 +210,7 @@ impl Tlas {
             quality,
             policy: TlasPolicy::default(),
             changes: 0,
+            committed_count: 0,
             stale: false,
             rebuild_pending: false,
             counters: TlasCounters::default(),
@@ -278,6 +282,7 @@ impl Tlas {
         self.counters.conversions += 1;
         self.stale = false;
         self.changes = 0;
+        self.committed_count = self.bounded_count();
     }
 
     /// Counts one changed leaf; past the churn threshold the remaining
@@ -285,7 +290,7 @@ impl Tlas {
     fn note_change(&mut self) {
         self.changes += 1;
         self.stale = true;
-        let n = self.bounded_count().max(1);
+        let n = self.committed_count;
         if n <= self.policy.rebuild_below
             || self.changes as f32 > self.policy.rebuild_fraction * n as f32
         {

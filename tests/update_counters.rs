@@ -165,15 +165,34 @@ fn each_change_does_only_its_own_work() {
     assert!(world.resource::<SceneSync>().instance(extra).is_some());
     assert!(world.resource::<SceneSync>().instance(objects[3]).is_none());
 
-    // Churn above the threshold (10 of 20 moved): one rebuild.
-    for &e in objects.iter().filter(|&&e| e != objects[3]).take(10) {
+    // Churn above the threshold (more leaf changes than instances at the
+    // last commit: 5 of the 20 despawned, the other 15 moved, 2 spawned):
+    // one rebuild.
+    let live: Vec<Entity> = objects
+        .iter()
+        .copied()
+        .filter(|&e| e != objects[3])
+        .chain([extra])
+        .collect();
+    assert_eq!(live.len(), 20);
+    for &e in &live[..5] {
+        world.despawn(e);
+    }
+    for &e in &live[5..] {
         world.get_mut::<Transform>(e).unwrap().0.translation.y += 0.5;
+    }
+    for x in [30.0, 33.0] {
+        world.spawn((
+            Transform::from_translation(Vec3::new(x, 0.0, 0.0)),
+            Shape::Sphere { radius: 0.5 },
+        ));
     }
     run_frame(&mut world, &mut schedule);
     let (c4, u4, m4) = counters(&world);
     assert_eq!(u4, TlasUpdate::Rebuilt);
     assert_eq!(c4.rebuilds, c3.rebuilds + 1);
     assert_eq!(m4, m3, "a top-level rebuild built a mesh BVH");
-    assert_eq!(world.resource::<Frame>().update.moved, 10);
+    let u = world.resource::<Frame>().update;
+    assert_eq!((u.removed, u.added, u.moved), (5, 2, 15));
     assert_eq!(mesh_bvh_builds(), built);
 }
