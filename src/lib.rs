@@ -40,12 +40,14 @@ pub mod output;
 pub mod packet;
 pub mod path;
 pub mod procedural;
+pub mod progressive;
 pub mod queues;
 pub mod rng;
 pub mod scene;
 pub mod shading;
 pub mod shapes;
 pub mod stats;
+pub mod tlas;
 pub mod transform;
 
 #[path = "../systems/mod.rs"]

@@ -574,7 +574,7 @@ impl Mesh {
             })
             .collect();
         let bvh = build_bvh(&boxes, quality);
-        TRIANGLE_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let triangles: Vec<[u32; 3]> = bvh
             .primitive_indices
             .iter()
@@ -768,13 +768,13 @@ fn vertex_normals(positions: &[Vec3A], indices: &[[u32; 3]]) -> Vec<Vec3A> {
     normals.iter().map(|n| n.normalize_or_zero()).collect()
 }
 
-static TRIANGLE_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+static MESH_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-/// Number of triangle (mesh) BVHs built by this process so far: a scene
-/// without meshes adds none, and moving or re-materialing an instance
-/// rebuilds none.
-pub fn triangle_bvh_builds() -> u64 {
-    TRIANGLE_BVH_BUILDS.load(std::sync::atomic::Ordering::Relaxed)
+/// Number of mesh BVHs built by this process so far (one per successful
+/// [`Mesh::new`]). Scene updates never build one: tests compare this
+/// counter before and after.
+pub fn mesh_bvh_builds() -> u64 {
+    MESH_BVH_BUILDS.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// ECS component: the entity is an instance of this shared mesh.

@@ -6,15 +6,16 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{Vec2, Vec3A};
-use obvhs::{aabb::Aabb, cwbvh::CwBvh};
+use obvhs::aabb::Aabb;
 
 use crate::emitters::EmitterTable;
 use crate::light::WorldLight;
 use crate::material::Material;
 use crate::math::{Color, Ray};
-use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, build_bvh, padded_aabb, traverse_bvh};
+use crate::mesh::{BuildQuality, MAX_COORDINATE, Mesh, padded_aabb, traverse_bvh};
 use crate::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
 use crate::shapes::Shape;
+use crate::tlas::{Tlas, TlasCounters, TlasPolicy, TlasUpdate};
 use crate::transform::{InstanceTransform, Transform};
 
 /// The geometry of one instance.
@@ -128,15 +129,18 @@ pub struct RenderScene {
     pub lights: Vec<WorldLight>,
     /// Radiance of escaped rays.
     pub background: Color,
-    /// Emissive surfaces as area lights, for path tracing.
+    /// Emissive surfaces as area lights, for path tracing (rebuilt by
+    /// [`RenderScene::commit`] when instances or materials change).
     pub emitters: EmitterTable,
-    /// Top-level BVH over bounded instances.
-    tlas: CwBvh,
-    /// Instance index per TLAS leaf slot.
-    tlas_instances: Vec<u32>,
-    /// Instances without bounds (infinite planes), tested one by one.
-    unbounded: Vec<u32>,
-    /// Seconds spent building the top-level BVH.
+    /// Set by changes to instances or materials: the emitter table is
+    /// rebuilt at the next commit.
+    emitters_stale: bool,
+    /// Top-level BVH over bounded instances, the instance of each of its
+    /// leaf slots, and the unbounded instances (infinite planes) tested one
+    /// by one.
+    tlas: Tlas,
+    /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
+    /// or by the last [`RenderScene::commit`] that changed it).
     pub tlas_build_seconds: f64,
 }
 
@@ -160,32 +164,7 @@ impl RenderScene {
         quality: BuildQuality,
     ) -> Self {
         let start = Instant::now();
-        let mut boxes = Vec::with_capacity(instances.len());
-        let mut bounded = Vec::with_capacity(instances.len());
-        let mut unbounded = Vec::new();
-        for (i, inst) in instances.iter().enumerate() {
-            match inst.world_bounds() {
-                Some(b) => {
-                    boxes.push(b);
-                    bounded.push(i as u32);
-                }
-                None => {
-                    // A mesh without triangles can never be hit; planes and
-                    // huge objects are tested one by one.
-                    let empty_mesh = matches!(&inst.geometry,
-                        InstanceGeometry::Mesh(m) if m.triangle_count() == 0);
-                    if !empty_mesh {
-                        unbounded.push(i as u32);
-                    }
-                }
-            }
-        }
-        let tlas = build_bvh(&boxes, quality);
-        let tlas_instances = tlas
-            .primitive_indices
-            .iter()
-            .map(|&slot| bounded[slot as usize])
-            .collect();
+        let tlas = Tlas::build(&instances, quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
             instances,
@@ -193,9 +172,8 @@ impl RenderScene {
             lights,
             background,
             emitters,
+            emitters_stale: false,
             tlas,
-            tlas_instances,
-            unbounded,
             tlas_build_seconds: start.elapsed().as_secs_f64(),
         }
     }
@@ -263,15 +241,15 @@ impl RenderScene {
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
-        for &i in &self.unbounded {
+        for &i in &self.tlas.unbounded {
             if let Some((t, h)) = self.intersect_instance(i, ray, t_min, t_max) {
                 t_max = t;
                 best = Some((t, i, h));
             }
         }
-        if !self.tlas_instances.is_empty() {
-            traverse_bvh(&self.tlas, ray, t_min, t_max, false, |slot, t_max| {
-                let inst = self.tlas_instances[slot];
+        if !self.tlas.leaf_instances.is_empty() {
+            traverse_bvh(&self.tlas.cw, ray, t_min, t_max, false, |slot, t_max| {
+                let inst = self.tlas.leaf_instances[slot];
                 let (t, h) = self.intersect_instance(inst, ray, t_min, t_max)?;
                 best = Some((t, inst, h));
                 Some(t)
@@ -285,17 +263,18 @@ impl RenderScene {
     /// at the first blocker found.
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         if self
+            .tlas
             .unbounded
             .iter()
             .any(|&i| self.occludes_instance(i, ray, t_min, t_max))
         {
             return true;
         }
-        if self.tlas_instances.is_empty() {
+        if self.tlas.leaf_instances.is_empty() {
             return false;
         }
-        traverse_bvh(&self.tlas, ray, t_min, t_max, true, |slot, t_max| {
-            self.occludes_instance(self.tlas_instances[slot], ray, t_min, t_max)
+        traverse_bvh(&self.tlas.cw, ray, t_min, t_max, true, |slot, t_max| {
+            self.occludes_instance(self.tlas.leaf_instances[slot], ray, t_min, t_max)
                 .then_some(t_min)
         })
     }
@@ -308,7 +287,7 @@ impl RenderScene {
         let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
         let mut t_max = [f32::INFINITY; LANES];
         for (l, ray) in rays[..n].iter().enumerate() {
-            for &i in &self.unbounded {
+            for &i in &self.tlas.unbounded {
                 if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
                     t_max[l] = t;
                     best[l] = Some((t, i, h));
@@ -316,8 +295,8 @@ impl RenderScene {
             }
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
-        packet::traverse(&self.tlas, &mut packet, ALL_LANES, |p, lanes, slot| {
-            let index = self.tlas_instances[slot];
+        packet::traverse(&self.tlas.cw, &mut packet, ALL_LANES, |p, lanes, slot| {
+            let index = self.tlas.leaf_instances[slot];
             let inst = &self.instances[index as usize];
             match &inst.geometry {
                 InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
@@ -357,6 +336,7 @@ impl RenderScene {
         let mut blocked: LaneMask = 0;
         for (l, ray) in rays[..n].iter().enumerate() {
             if self
+                .tlas
                 .unbounded
                 .iter()
                 .any(|&i| self.occludes_instance(i, ray, 0.0, t_max[l]))
@@ -366,8 +346,8 @@ impl RenderScene {
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let todo = ALL_LANES & !blocked;
-        packet::traverse(&self.tlas, &mut packet, todo, |p, lanes, slot| {
-            let inst = &self.instances[self.tlas_instances[slot] as usize];
+        packet::traverse(&self.tlas.cw, &mut packet, todo, |p, lanes, slot| {
+            let inst = &self.instances[self.tlas.leaf_instances[slot] as usize];
             let now = match &inst.geometry {
                 InstanceGeometry::Shape(s) => {
                     let mut now = 0;
@@ -442,5 +422,134 @@ impl RenderScene {
             instance: index,
             material: inst.material,
         }
+    }
+}
+
+/// Incremental updates, for scenes that change from frame to frame.
+///
+/// Every change goes through these methods and becomes visible to
+/// traversal at the next [`RenderScene::commit`], which is also the one
+/// place where anything derived from instances and materials is brought up
+/// to date. Between a change and the commit, intersection queries must not
+/// be made. Mesh BVHs are never rebuilt: they live in the shared
+/// [`Mesh`]es; only the top level over instances changes.
+impl RenderScene {
+    /// Appends an instance; returns its index. Its material index must be
+    /// valid once the scene is committed.
+    pub fn push_instance(&mut self, instance: Instance) -> u32 {
+        self.emitters_stale = true;
+        let index = self.instances.len() as u32;
+        self.tlas.inserted(index, &instance);
+        self.instances.push(instance);
+        index
+    }
+
+    /// Removes instance `index` by moving the last instance into its place
+    /// (so the last instance's index becomes `index`); returns the removed
+    /// instance. Panics if `index` is out of range.
+    pub fn swap_remove_instance(&mut self, index: u32) -> Instance {
+        self.emitters_stale = true;
+        let last = self.instances.len() as u32 - 1;
+        assert!(index <= last, "instance {index} out of range");
+        self.tlas.removing(index, last);
+        self.instances.swap_remove(index as usize)
+    }
+
+    /// Moves instance `index`; `transform` must be valid
+    /// ([`Transform::is_valid`]).
+    pub fn set_instance_transform(&mut self, index: u32, transform: &Transform) {
+        self.emitters_stale = true;
+        let inst = &mut self.instances[index as usize];
+        inst.transform = crate::transform::InstanceTransform::new(transform);
+        self.tlas.updated(index, inst);
+    }
+
+    /// Gives instance `index` another shape or mesh (the mesh's own BVH is
+    /// reused as it is).
+    pub fn set_instance_geometry(&mut self, index: u32, geometry: InstanceGeometry) {
+        self.emitters_stale = true;
+        let inst = &mut self.instances[index as usize];
+        inst.geometry = geometry;
+        self.tlas.updated(index, inst);
+    }
+
+    /// Points instance `index` at material `material`.
+    pub fn set_instance_material(&mut self, index: u32, material: u32) {
+        self.emitters_stale = true;
+        self.instances[index as usize].material = material;
+    }
+
+    /// Appends a material; returns its index.
+    pub fn push_material(&mut self, material: Material) -> u32 {
+        self.emitters_stale = true;
+        self.materials.push(material);
+        self.materials.len() as u32 - 1
+    }
+
+    /// Replaces material `index`. Touches no BVH.
+    pub fn set_material(&mut self, index: u32, material: Material) {
+        self.emitters_stale = true;
+        self.materials[index as usize] = material;
+    }
+
+    /// Removes material `index` by moving the last material into its
+    /// place; instances that used the last material are pointed at
+    /// `index`. No instance may still use the removed material.
+    pub fn swap_remove_material(&mut self, index: u32) -> Material {
+        self.emitters_stale = true;
+        let last = self.materials.len() as u32 - 1;
+        assert!(index <= last, "material {index} out of range");
+        if index != last {
+            for inst in &mut self.instances {
+                if inst.material == last {
+                    inst.material = index;
+                }
+            }
+        }
+        self.materials.swap_remove(index as usize)
+    }
+
+    /// Replaces the lights.
+    pub fn set_lights(&mut self, lights: Vec<WorldLight>) {
+        self.lights = lights;
+    }
+
+    /// Sets the radiance of escaped rays.
+    pub fn set_background(&mut self, background: Color) {
+        self.background = background;
+    }
+
+    /// Makes the changes since the last commit visible: rebuilds the
+    /// emitter table if instances or materials changed, updates the top
+    /// level (leaf updates then a conversion, or a full rebuild above the
+    /// churn threshold of [`TlasPolicy`]), and returns what was done to
+    /// the top level.
+    pub fn commit(&mut self) -> TlasUpdate {
+        if self.emitters_stale {
+            // Area lights follow moved, added, removed and re-materialed
+            // instances; this is a table, not a BVH.
+            self.emitters = EmitterTable::build(&self.instances, &self.materials);
+            self.emitters_stale = false;
+        }
+        let update = self.tlas.commit(&self.instances);
+        if update != TlasUpdate::Unchanged {
+            self.tlas_build_seconds = self.tlas.last_seconds;
+        }
+        update
+    }
+
+    /// Cumulative work done on the top level.
+    pub fn tlas_counters(&self) -> TlasCounters {
+        self.tlas.counters()
+    }
+
+    /// The policy deciding between leaf updates and rebuilds.
+    pub fn tlas_policy(&self) -> TlasPolicy {
+        self.tlas.policy
+    }
+
+    /// Changes the policy deciding between leaf updates and rebuilds.
+    pub fn set_tlas_policy(&mut self, policy: TlasPolicy) {
+        self.tlas.policy = policy;
     }
 }

@@ -6,18 +6,25 @@
 //! and [`Camera`]. Each frame runs three stages, declared once in
 //! [`add_render_systems`]:
 //!
-//! 1. [`PrismSystems::Extract`]: gather instances, materials and lights
-//!    from the world ([`extract_scene`]);
-//! 2. [`PrismSystems::Accelerate`]: build the top-level BVH
-//!    ([`build_acceleration`]);
+//! 1. [`PrismSystems::Extract`]: apply what changed in the world since the
+//!    last frame to the persistent scene, through change detection (see
+//!    [`sync`]), and read the camera;
+//! 2. [`PrismSystems::Accelerate`]: update the top-level BVH
+//!    ([`sync::commit_scene`]);
 //! 3. [`PrismSystems::Render`]: trace the image into [`Frame`], with
 //!    [`render_recursive`] or, stage by stage, with the wavefront systems
 //!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]).
+//!
+//! Games add these stages to their own schedule with [`PrismPlugin`]; see
+//! its example. With [`ProgressiveRendering`] on, frames of an unchanged
+//! scene accumulate samples.
 //!
 //! This module is compiled as part of the `prism` crate (one crate keeps
 //! the build short and the binary simple); the kernels in `src/` never
 //! refer to it.
 
+pub mod demo;
+pub mod sync;
 pub mod wavefront;
 
 use std::sync::Arc;
@@ -31,14 +38,12 @@ use crate::desc::{Geometry, SceneDesc};
 use crate::film::Film;
 use crate::integrator::wavefront::WavefrontReport;
 use crate::integrator::{self, IntegratorKind, RenderSettings};
-use crate::light::{Light, WorldLight};
-use crate::material::Material;
 use crate::math::Color;
 use crate::mesh::{BuildQuality, MeshInstance};
-use crate::scene::{Instance, InstanceGeometry, RenderScene};
-use crate::shapes::Shape;
+use crate::progressive::Accumulator;
+use crate::scene::RenderScene;
 use crate::stats::RenderCounters;
-use crate::transform::Transform;
+use sync::SceneUpdateReport;
 
 /// The stages of a frame, run in this order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
@@ -89,23 +94,42 @@ impl Default for RenderConfig {
     }
 }
 
-/// Instances, materials and lights read from the world this frame.
+/// The camera read from the world this frame, or why the frame cannot be
+/// rendered.
 #[derive(Resource, Default)]
 pub struct ExtractedScene {
-    instances: Vec<Instance>,
-    materials: Vec<Material>,
-    lights: Vec<WorldLight>,
     camera: Option<Camera>,
     error: Option<String>,
 }
 
-/// The render-ready scene with its BVH.
+/// The render-ready scene with its BVH. It persists between frames and is
+/// updated in place by the systems of [`sync`].
 #[derive(Resource, Default)]
 pub struct SceneAccel {
     /// The scene, once built.
     pub scene: Option<Arc<RenderScene>>,
-    /// Seconds spent building the top-level BVH this frame.
+    /// Seconds spent updating the top-level BVH this frame.
     pub build_seconds: f64,
+}
+
+/// Progressive accumulation: while nothing changes (scene, camera,
+/// settings), each frame adds `spp` samples per pixel to the previous
+/// ones, and frame `k` is bit for bit the image of `k * spp` samples (see
+/// [`crate::progressive`]). Any change starts again from `spp` samples.
+/// Applies to the recursive integrator (Whitted or path transport); the
+/// wavefront renders each frame independently.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ProgressiveRendering {
+    /// Accumulate frames while nothing changes.
+    pub enabled: bool,
+}
+
+/// The running sums of progressive rendering and what they were rendered
+/// with.
+#[derive(Resource, Default)]
+pub struct AccumulationState {
+    accumulator: Accumulator,
+    key: Option<(RenderSettings, Camera, Color)>,
 }
 
 /// The finished frame.
@@ -121,6 +145,12 @@ pub struct Frame {
     pub render_seconds: f64,
     /// Stage times and queue memory, for wavefront frames.
     pub wavefront: Option<WavefrontReport>,
+    /// What the scene update did this frame, with its timings and BVH
+    /// work counters.
+    pub update: SceneUpdateReport,
+    /// Samples per pixel in the image (more than `spp` when progressive
+    /// frames accumulated).
+    pub samples: u32,
 }
 
 /// Adds Prism's stages to `schedule` in order.
@@ -134,8 +164,17 @@ pub fn add_render_systems(schedule: &mut Schedule) {
             .chain(),
     );
     schedule.add_systems((
-        extract_scene.in_set(PrismSystems::Extract),
-        build_acceleration.in_set(PrismSystems::Accelerate),
+        (
+            sync::prepare_sync,
+            sync::sync_removed,
+            sync::sync_added,
+            sync::sync_transforms,
+            sync::sync_geometry_and_materials,
+            sync::extract_camera,
+        )
+            .chain()
+            .in_set(PrismSystems::Extract),
+        sync::commit_scene.in_set(PrismSystems::Accelerate),
         render_recursive
             .run_if(integrator_is(IntegratorKind::Recursive))
             .in_set(PrismSystems::Render),
@@ -152,10 +191,134 @@ pub fn setup(world: &mut World) -> Schedule {
     world.init_resource::<ExtractedScene>();
     world.init_resource::<SceneAccel>();
     world.init_resource::<Frame>();
+    world.init_resource::<sync::SceneSync>();
+    world.init_resource::<ProgressiveRendering>();
+    world.init_resource::<AccumulationState>();
     wavefront::add_wavefront_schedules(world);
     let mut schedule = Schedule::new(RenderFrame);
     add_render_systems(&mut schedule);
     schedule
+}
+
+/// Runs one frame of `schedule` and then [`World::clear_trackers`], which
+/// `bevy_ecs` needs once per frame so that removal events (used by the
+/// incremental scene update) do not pile up.
+pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
+    schedule.run(world);
+    world.clear_trackers();
+}
+
+/// Adds Prism to a game's own world and schedule: resources, the
+/// wavefront's schedules, and the three stages (after which the finished
+/// image is in the [`Frame`] resource).
+///
+/// Entities the game spawns with [`Transform`](crate::transform::Transform)
+/// and a [`Shape`](crate::shapes::Shape) or [`MeshInstance`] (optionally
+/// a [`Material`](crate::material::Material)), lights
+/// ([`Light`](crate::light::Light), placed by their transform) and a
+/// [`Camera`] are rendered; each frame only what changed is updated.
+/// Order your game systems `.before(PrismSystems::Extract)` so a frame
+/// shows this tick's state, and call [`World::clear_trackers`] after each
+/// run (or use [`run_frame`]).
+///
+/// ```
+/// use bevy_ecs::prelude::*;
+/// use glam::Vec3;
+/// use prism::camera::Camera;
+/// use prism::integrator::RenderSettings;
+/// use prism::light::Light;
+/// use prism::material::Material;
+/// use prism::shapes::Shape;
+/// use prism::systems::{Frame, PrismPlugin, PrismSystems, run_frame};
+/// use prism::transform::Transform;
+///
+/// #[derive(Component)]
+/// struct Spin;
+///
+/// fn spin(mut q: Query<&mut Transform, With<Spin>>) {
+///     for mut t in &mut q {
+///         t.0.translation.x += 0.1;
+///     }
+/// }
+///
+/// let mut world = World::new();
+/// let mut schedule = Schedule::default();
+/// schedule.add_systems(spin.before(PrismSystems::Extract));
+/// PrismPlugin::new()
+///     .settings(RenderSettings { width: 32, height: 24, max_depth: 2, ..Default::default() })
+///     .progressive(true)
+///     .build(&mut world, &mut schedule);
+///
+/// world.spawn((
+///     Transform::from_translation(Vec3::ZERO),
+///     Shape::Sphere { radius: 1.0 },
+///     Material::default(),
+///     Spin,
+/// ));
+/// world.spawn((
+///     Transform::from_translation(Vec3::new(0.0, 4.0, 4.0)),
+///     Light::Point { intensity: Vec3::splat(50.0) },
+/// ));
+/// world.spawn(Camera::default()); // at z = 5, looking at the origin
+///
+/// run_frame(&mut world, &mut schedule); // the first frame adds everything
+/// assert_eq!(world.resource::<Frame>().update.added, 1);
+/// for _ in 0..2 {
+///     run_frame(&mut world, &mut schedule);
+///     let frame = world.resource::<Frame>();
+///     assert!(frame.error.is_none());
+///     assert_eq!((frame.update.added, frame.update.moved), (0, 1)); // only the move
+/// }
+/// let film = world.resource::<Frame>().film.as_ref().expect("rendered");
+/// assert_eq!((film.width, film.height), (32, 24));
+/// ```
+#[derive(Clone, Default)]
+pub struct PrismPlugin {
+    config: RenderConfig,
+    progressive: bool,
+}
+
+impl PrismPlugin {
+    /// Default settings: the recursive integrator, Whitted transport,
+    /// 640x480, one sample per pixel.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Image size, samples, depth, seed, transport.
+    pub fn settings(mut self, settings: RenderSettings) -> Self {
+        self.config.settings = settings;
+        self
+    }
+
+    /// The whole render configuration.
+    pub fn config(mut self, config: RenderConfig) -> Self {
+        self.config = config;
+        self
+    }
+
+    /// Accumulate samples over frames while nothing changes.
+    pub fn progressive(mut self, enabled: bool) -> Self {
+        self.progressive = enabled;
+        self
+    }
+
+    /// Inserts the resources into `world` (replacing any [`RenderConfig`]
+    /// and [`ProgressiveRendering`]) and adds Prism's stages to
+    /// `schedule`.
+    pub fn build(self, world: &mut World, schedule: &mut Schedule) {
+        world.insert_resource(self.config);
+        world.insert_resource(ProgressiveRendering {
+            enabled: self.progressive,
+        });
+        world.init_resource::<ExtractedScene>();
+        world.init_resource::<SceneAccel>();
+        world.init_resource::<Frame>();
+        world.init_resource::<sync::SceneSync>();
+        world.init_resource::<AccumulationState>();
+        wavefront::add_wavefront_schedules(world);
+        add_render_systems(schedule);
+    }
 }
 
 /// Spawns a loaded scene's objects, lights and cameras; returns the camera
@@ -177,77 +340,6 @@ pub fn spawn_scene(world: &mut World, desc: SceneDesc) -> Vec<Entity> {
         .collect()
 }
 
-/// Stage 1: reads shapes, meshes, materials, lights and the camera.
-///
-/// Entities are visited in entity order so the result does not depend on
-/// archetype layout. Entities with an invalid transform make the frame
-/// fail with a message.
-#[allow(clippy::type_complexity)]
-pub fn extract_scene(
-    config: Res<RenderConfig>,
-    shapes: Query<(Entity, &Transform, &Shape, Option<&Material>)>,
-    meshes: Query<(Entity, &Transform, &MeshInstance, Option<&Material>)>,
-    lights: Query<(Entity, &Light, Option<&Transform>)>,
-    cameras: Query<(Entity, &Camera)>,
-    mut out: ResMut<ExtractedScene>,
-) {
-    let out = &mut *out;
-    out.instances.clear();
-    out.materials.clear();
-    out.lights.clear();
-    out.error = None;
-    let mut objects: Vec<(Entity, &Transform, InstanceGeometry, Option<&Material>)> = shapes
-        .iter()
-        .map(|(e, t, s, m)| (e, t, InstanceGeometry::Shape(s.clone()), m))
-        .chain(
-            meshes
-                .iter()
-                .map(|(e, t, mi, m)| (e, t, InstanceGeometry::Mesh(mi.0.clone()), m)),
-        )
-        .collect();
-    objects.sort_by_key(|o| o.0);
-    for (e, t, g, m) in objects {
-        if !t.is_valid() {
-            out.error = Some(format!(
-                "entity {e}: transform is not finite and invertible"
-            ));
-            return;
-        }
-        let id = out.materials.len() as u32;
-        out.materials.push(m.cloned().unwrap_or_default());
-        out.instances.push(Instance::new(g, t, id));
-    }
-    let mut ls: Vec<_> = lights.iter().collect();
-    ls.sort_by_key(|l| l.0);
-    out.lights = ls
-        .into_iter()
-        .map(|(_, l, t)| WorldLight::new(l, t.unwrap_or(&Transform::default())))
-        .collect();
-    out.camera = match config.camera {
-        Some(e) => cameras.get(e).ok().map(|(_, c)| c.clone()),
-        None => cameras.iter().min_by_key(|c| c.0).map(|(_, c)| c.clone()),
-    };
-}
-
-/// Stage 2: builds the top-level BVH over the extracted instances.
-pub fn build_acceleration(
-    config: Res<RenderConfig>,
-    mut extracted: ResMut<ExtractedScene>,
-    mut accel: ResMut<SceneAccel>,
-) {
-    let start = Instant::now();
-    let ex = &mut *extracted;
-    let scene = RenderScene::new(
-        std::mem::take(&mut ex.instances),
-        std::mem::take(&mut ex.materials),
-        std::mem::take(&mut ex.lights),
-        config.background,
-        config.bvh_quality,
-    );
-    accel.scene = Some(Arc::new(scene));
-    accel.build_seconds = start.elapsed().as_secs_f64();
-}
-
 /// Run condition: the configured integrator is `kind`.
 pub fn integrator_is(kind: IntegratorKind) -> impl Fn(Res<RenderConfig>) -> bool + Clone {
     move |config: Res<RenderConfig>| config.integrator == kind
@@ -257,7 +349,14 @@ pub fn integrator_is(kind: IntegratorKind) -> impl Fn(Res<RenderConfig>) -> bool
 /// camera, valid settings and a built scene. On failure it records the
 /// reason in [`Frame`] and returns `None`.
 pub fn frame_preconditions(world: &mut World) -> Option<(Arc<RenderScene>, Camera)> {
-    *world.resource_mut::<Frame>() = Frame::default();
+    {
+        let mut frame = world.resource_mut::<Frame>();
+        let update = frame.update;
+        *frame = Frame {
+            update,
+            ..Default::default()
+        };
+    }
     let extracted = world.resource::<ExtractedScene>();
     let result = (|| {
         if let Some(e) = &extracted.error {
@@ -291,6 +390,13 @@ pub fn render_recursive(world: &mut World) {
         return;
     };
     let config = world.resource::<RenderConfig>().clone();
+    let progressive = world
+        .get_resource::<ProgressiveRendering>()
+        .is_some_and(|p| p.enabled);
+    if progressive {
+        render_progressive(world, &scene, camera, &config);
+        return;
+    }
     let start = Instant::now();
     let progress = config
         .progress
@@ -302,6 +408,38 @@ pub fn render_recursive(world: &mut World) {
     frame.render_seconds = start.elapsed().as_secs_f64();
     frame.film = Some(film);
     frame.counters = counters;
+    frame.samples = config.settings.spp;
+}
+
+/// Adds `spp` samples to the running sums, after starting them again if
+/// anything changed: the scene (this frame's update), the camera, the
+/// settings or the background.
+fn render_progressive(
+    world: &mut World,
+    scene: &RenderScene,
+    camera: Camera,
+    config: &RenderConfig,
+) {
+    let changed = world.resource::<Frame>().update.changed();
+    let key = (config.settings.clone(), camera, config.background);
+    let mut state = world.resource_mut::<AccumulationState>();
+    if changed || state.key.as_ref() != Some(&key) {
+        state.accumulator = Accumulator::new(config.settings.width, config.settings.height);
+        state.key = Some(key);
+    }
+    let (settings, camera, _) = state.key.clone().expect("just set");
+    let start = Instant::now();
+    let counters = state.accumulator.add_samples(scene, &camera, &settings);
+    let film = state.accumulator.film();
+    let samples = state.accumulator.samples();
+    if let Some(p) = &config.progress {
+        p(settings.height as u64);
+    }
+    let mut frame = world.resource_mut::<Frame>();
+    frame.render_seconds = start.elapsed().as_secs_f64();
+    frame.film = Some(film);
+    frame.counters = counters;
+    frame.samples = samples;
 }
 
 /// Renders a loaded scene in a fresh world: spawns it, runs one frame and

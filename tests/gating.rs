@@ -154,7 +154,7 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
 
 #[test]
 fn a_sphere_only_scene_builds_no_triangle_bvh() {
-    let before = prism::mesh::triangle_bvh_builds();
+    let before = prism::mesh::mesh_bvh_builds();
     for transport in [Transport::Whitted, Transport::Path] {
         let world = wavefront_world(DIFFUSE_ONLY, transport, false);
         let scene = world
@@ -166,7 +166,7 @@ fn a_sphere_only_scene_builds_no_triangle_bvh() {
         assert_eq!(features.mesh_instances, 0, "{transport:?}");
         assert_eq!(features.shapes, ["disk", "sphere"]);
     }
-    assert_eq!(prism::mesh::triangle_bvh_builds(), before);
+    assert_eq!(prism::mesh::mesh_bvh_builds(), before);
     // The counter does count: a one-triangle mesh builds one.
     let _ = prism::mesh::Mesh::new(
         "triangle",
@@ -179,5 +179,5 @@ fn a_sphere_only_scene_builds_no_triangle_bvh() {
         BuildQuality::Fastest,
     )
     .unwrap();
-    assert_eq!(prism::mesh::triangle_bvh_builds(), before + 1);
+    assert_eq!(prism::mesh::mesh_bvh_builds(), before + 1);
 }

@@ -1,0 +1,198 @@
+//! What each kind of change costs, by the counters of the frame: moving an
+//! object builds no mesh BVH and updates one top-level leaf; changing a
+//! material touches no BVH at all.
+//!
+//! This file holds a single test: the mesh BVH counter is process-wide,
+//! and no other test may build meshes while it runs.
+
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+use glam::Vec3;
+use prism::camera::Camera;
+use prism::integrator::RenderSettings;
+use prism::light::Light;
+use prism::material::Material;
+use prism::math::{Color, Ray};
+use prism::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode, mesh_bvh_builds};
+use prism::shapes::Shape;
+use prism::systems::sync::SceneSync;
+use prism::systems::{Frame, PrismPlugin, SceneAccel, run_frame};
+use prism::tlas::{TlasCounters, TlasUpdate};
+use prism::transform::Transform;
+
+fn knot(p: u32, q: u32) -> Arc<Mesh> {
+    let data = prism::procedural::torus_knot(p, q, 1.0, 0.3, 64, 8);
+    Arc::new(Mesh::new("knot", data, NormalMode::Smooth, BuildQuality::Medium).unwrap())
+}
+
+fn counters(world: &World) -> (TlasCounters, TlasUpdate, u64) {
+    let u = world.resource::<Frame>().update;
+    (u.tlas_counters, u.tlas, u.mesh_bvh_builds)
+}
+
+/// The material of the first hit along `ray`.
+fn material_hit(world: &World, ray: &Ray) -> Color {
+    let scene = world.resource::<SceneAccel>().scene.clone().unwrap();
+    let hit = scene.intersect(ray, 0.0, f32::INFINITY).expect("hit");
+    scene.materials[hit.material as usize].base_color
+}
+
+#[test]
+fn each_change_does_only_its_own_work() {
+    let knots = [knot(2, 3), knot(3, 5)];
+    let built = mesh_bvh_builds();
+    assert!(built >= 2);
+    let mut world = World::new();
+    let mut schedule = Schedule::default();
+    PrismPlugin::new()
+        .settings(RenderSettings {
+            width: 16,
+            height: 12,
+            max_depth: 2,
+            ..Default::default()
+        })
+        .build(&mut world, &mut schedule);
+    // 20 objects on a grid: one change is 5% churn, below the threshold.
+    let mut objects = Vec::new();
+    for i in 0..20 {
+        let t =
+            Transform::from_translation(Vec3::new((i % 5) as f32 * 3.0, (i / 5) as f32 * 3.0, 0.0));
+        let mut e = world.spawn((t, Material::default()));
+        if i % 2 == 0 {
+            e.insert(MeshInstance(knots[i % 4 / 2].clone()));
+        } else {
+            e.insert(Shape::Sphere { radius: 1.0 });
+        }
+        objects.push(e.id());
+    }
+    world.spawn((
+        Transform::from_translation(Vec3::new(0.0, 5.0, 10.0)),
+        Light::Point {
+            intensity: Color::splat(100.0),
+        },
+    ));
+    world.spawn(Camera {
+        look_from: Vec3::new(6.0, 4.5, 30.0),
+        look_at: Vec3::new(6.0, 4.5, 0.0),
+        ..Default::default()
+    });
+    run_frame(&mut world, &mut schedule);
+    let (c0, u0, m0) = counters(&world);
+    assert_eq!(u0, TlasUpdate::Rebuilt);
+    assert_eq!(m0, built, "the first frame built a mesh BVH");
+    assert_eq!(c0.rebuilds, 1);
+    assert_eq!(world.resource::<Frame>().update.added, 20);
+
+    // Nothing changes: no work at all.
+    run_frame(&mut world, &mut schedule);
+    assert_eq!(counters(&world), (c0, TlasUpdate::Unchanged, m0));
+    assert!(!world.resource::<Frame>().update.changed());
+
+    // Move one mesh object: one leaf reinserted, one conversion, no mesh
+    // BVH built, no rebuild.
+    world
+        .get_mut::<Transform>(objects[0])
+        .unwrap()
+        .0
+        .translation
+        .z -= 4.0;
+    run_frame(&mut world, &mut schedule);
+    let (c1, u1, m1) = counters(&world);
+    assert_eq!(u1, TlasUpdate::Incremental);
+    assert_eq!(m1, m0, "moving an object built a mesh BVH");
+    assert_eq!(
+        c1,
+        TlasCounters {
+            reinserts: c0.reinserts + 1,
+            conversions: c0.conversions + 1,
+            ..c0
+        }
+    );
+    assert_eq!(world.resource::<Frame>().update.moved, 1);
+
+    // Change a material: no BVH touched, and the new material is hit.
+    let ray = Ray::new(
+        glam::Vec3A::new(3.0, 0.0, 20.0),
+        glam::Vec3A::new(0.0, 0.0, -1.0),
+    );
+    assert_eq!(material_hit(&world, &ray), Color::splat(0.8));
+    world.entity_mut(objects[1]).insert(Material {
+        base_color: Color::new(0.1, 0.2, 0.9),
+        ..Default::default()
+    });
+    run_frame(&mut world, &mut schedule);
+    assert_eq!(counters(&world), (c1, TlasUpdate::Unchanged, m1));
+    assert_eq!(world.resource::<Frame>().update.rematerial, 1);
+    assert!(world.resource::<Frame>().update.changed());
+    assert_eq!(material_hit(&world, &ray), Color::new(0.1, 0.2, 0.9));
+
+    // Re-mesh: the other (already built) mesh; one leaf, no mesh BVH.
+    world
+        .entity_mut(objects[0])
+        .insert(MeshInstance(knots[1].clone()));
+    run_frame(&mut world, &mut schedule);
+    let (c2, u2, m2) = counters(&world);
+    assert_eq!(u2, TlasUpdate::Incremental);
+    assert_eq!(m2, m1, "re-meshing built a mesh BVH");
+    assert_eq!(c2.reinserts, c1.reinserts + 1);
+    assert_eq!(c2.rebuilds, c1.rebuilds);
+    assert_eq!(world.resource::<Frame>().update.regeometry, 1);
+
+    // Spawn and despawn: one insert, one removal.
+    let extra = world
+        .spawn((
+            Transform::from_translation(Vec3::new(20.0, 0.0, 0.0)),
+            Shape::Sphere { radius: 0.5 },
+        ))
+        .id();
+    world.despawn(objects[3]);
+    run_frame(&mut world, &mut schedule);
+    let (c3, u3, m3) = counters(&world);
+    assert_eq!(u3, TlasUpdate::Incremental);
+    assert_eq!(m3, m2);
+    assert_eq!(
+        c3,
+        TlasCounters {
+            inserts: c2.inserts + 1,
+            removes: c2.removes + 1,
+            conversions: c2.conversions + 1,
+            ..c2
+        }
+    );
+    let u = world.resource::<Frame>().update;
+    assert_eq!((u.added, u.removed), (1, 1));
+    assert!(world.resource::<SceneSync>().instance(extra).is_some());
+    assert!(world.resource::<SceneSync>().instance(objects[3]).is_none());
+
+    // Churn above the threshold (more leaf changes than instances at the
+    // last commit: 5 of the 20 despawned, the other 15 moved, 2 spawned):
+    // one rebuild.
+    let live: Vec<Entity> = objects
+        .iter()
+        .copied()
+        .filter(|&e| e != objects[3])
+        .chain([extra])
+        .collect();
+    assert_eq!(live.len(), 20);
+    for &e in &live[..5] {
+        world.despawn(e);
+    }
+    for &e in &live[5..] {
+        world.get_mut::<Transform>(e).unwrap().0.translation.y += 0.5;
+    }
+    for x in [30.0, 33.0] {
+        world.spawn((
+            Transform::from_translation(Vec3::new(x, 0.0, 0.0)),
+            Shape::Sphere { radius: 0.5 },
+        ));
+    }
+    run_frame(&mut world, &mut schedule);
+    let (c4, u4, m4) = counters(&world);
+    assert_eq!(u4, TlasUpdate::Rebuilt);
+    assert_eq!(c4.rebuilds, c3.rebuilds + 1);
+    assert_eq!(m4, m3, "a top-level rebuild built a mesh BVH");
+    let u = world.resource::<Frame>().update;
+    assert_eq!((u.removed, u.added, u.moved), (5, 2, 15));
+    assert_eq!(mesh_bvh_builds(), built);
+}
