@@ -535,7 +535,7 @@ fn quality_change_resets_the_scene() {
     let _ = systems::setup;
 }
 
-/// Area lights follow their entities: after moving an emissive disk and
+/// Area lights follow their entities: after moving an emissive square and
 /// then changing its material, the incrementally updated scene renders
 /// (path transport, both integrators) exactly what a scene built from
 /// scratch renders.
@@ -565,7 +565,17 @@ fn area_lights_follow_moves_and_material_changes() {
     let light = world
         .spawn((
             Transform::from_translation(Vec3::new(0.0, 2.0, 0.0)),
-            Shape::Disk { radius: 0.5 },
+            // A polygon: its area-light entries are stored in world space,
+            // so a stale table would light from the old place.
+            Shape::Polygon {
+                vertices: vec![
+                    Vec3::new(-0.5, 0.0, -0.5),
+                    Vec3::new(-0.5, 0.0, 0.5),
+                    Vec3::new(0.5, 0.0, 0.5),
+                    Vec3::new(0.5, 0.0, -0.5),
+                ]
+                .into(),
+            },
             glow(4.0),
         ))
         .id();
