@@ -4,7 +4,7 @@
 //! The source of truth is an obvhs [`Bvh2`] with one instance per leaf:
 //! it is the only obvhs BVH that supports insertion, removal and moving of
 //! leaves. Traversal uses a [`CwBvh`] converted from it after each batch of
-//! changes (see [`Tlas::commit`]): conversion is linear in the number of
+//! changes (see `Tlas::commit`): conversion is linear in the number of
 //! instances, needs no sort, and keeps every traversal path (single rays,
 //! packets, the conservative node test of [`crate::mesh::traverse_bvh`])
 //! unchanged.
@@ -103,7 +103,7 @@ pub struct TlasCounters {
     pub conversions: u64,
 }
 
-/// What [`Tlas::commit`] did.
+/// What a top-level commit ([`crate::scene::RenderScene::commit`]) did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TlasUpdate {
     /// Nothing changed since the last commit.

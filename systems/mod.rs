@@ -2,7 +2,9 @@
 //! a `bevy_ecs` world into an image by calling the kernels.
 //!
 //! A scene is a world of entities carrying the components
-//! [`Transform`], [`Shape`] or [`MeshInstance`], [`Material`], [`Light`]
+//! [`Transform`](crate::transform::Transform), [`Shape`](crate::shapes::Shape)
+//! or [`MeshInstance`],
+//! [`Material`](crate::material::Material), [`Light`](crate::light::Light)
 //! and [`Camera`]. Each frame runs three stages, declared once in
 //! [`add_render_systems`]:
 //!

@@ -1,7 +1,7 @@
 //! Incremental scene updates through ECS change detection.
 //!
 //! The [`RenderScene`] in [`SceneAccel`] persists from frame to frame.
-//! Each frame the systems of [`PrismSystems::Extract`] apply only what
+//! Each frame the systems of [`PrismSystems::Extract`](super::PrismSystems::Extract) apply only what
 //! changed in the world, in this order:
 //!
 //! 1. [`sync_removed`]: objects despawned or stripped of their transform
@@ -12,7 +12,7 @@
 //! 4. [`sync_geometry_and_materials`]: changed shapes or meshes, changed
 //!    materials (which touch no BVH) and lights;
 //!
-//! then [`commit_scene`] (in [`PrismSystems::Accelerate`]) commits the
+//! then [`commit_scene`] (in [`PrismSystems::Accelerate`](super::PrismSystems::Accelerate)) commits the
 //! top level: leaf updates and a conversion, or a full rebuild above the
 //! churn threshold (see [`crate::tlas::TlasPolicy`]).
 //!

@@ -1,4 +1,5 @@
-//! Integrators: turn a [`RenderScene`] and a camera into a [`Film`].
+//! Integrators: turn a [`RenderScene`](crate::scene::RenderScene) and a
+//! camera into a [`Film`](crate::film::Film).
 
 pub mod recursive;
 pub mod wavefront;
