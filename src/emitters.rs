@@ -105,7 +105,8 @@ impl EmitterTable {
         let mut density = vec![InstanceDensity::None; instances.len()];
         // First pass: entries with their power; densities are fixed once
         // the total is known.
-        let mut per_instance: Vec<(usize, f32)> = Vec::new();
+        // (instance, emission weight, its first entry)
+        let mut per_instance: Vec<(usize, f32, usize)> = Vec::new();
         for (i, inst) in instances.iter().enumerate() {
             let Some(m) = materials.get(inst.material as usize) else {
                 continue;
@@ -187,7 +188,7 @@ impl EmitterTable {
                 InstanceGeometry::Shape(_) => {}
             }
             if entries.len() > first {
-                per_instance.push((i, weight));
+                per_instance.push((i, weight, first));
             }
         }
         let total: f64 = power.iter().map(|&p| p as f64).sum();
@@ -208,25 +209,15 @@ impl EmitterTable {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        for (i, weight) in per_instance {
+        for (i, weight, k) in per_instance {
             density[i] = match &instances[i].geometry {
-                InstanceGeometry::Shape(Shape::Sphere { radius }) => {
-                    // One entry per sphere: find its power again.
-                    let k = entries
-                        .iter()
-                        .position(|e| e.instance == i as u32)
-                        .expect("sphere entry");
-                    InstanceDensity::Sphere {
-                        select: (power[k] as f64 / total) as f32,
-                        radius: *radius,
-                    }
-                }
+                // One entry per sphere or disk, at `k`.
+                InstanceGeometry::Shape(Shape::Sphere { radius }) => InstanceDensity::Sphere {
+                    select: (power[k] as f64 / total) as f32,
+                    radius: *radius,
+                },
                 InstanceGeometry::Shape(Shape::Disk { .. }) => {
                     // Uniform over the disk: selection over world area.
-                    let k = entries
-                        .iter()
-                        .position(|e| e.instance == i as u32)
-                        .expect("disk entry");
                     let EntryGeometry::Disk { world_area, .. } = entries[k].geometry else {
                         unreachable!("disk entry")
                     };
@@ -369,5 +360,129 @@ fn shape_uv(shape: &Shape, p: Vec3A) -> Vec2 {
             Vec2::new(p.dot(u_axis), p.dot(v_axis))
         }
         _ => Vec2::ZERO,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::{Quat, Vec3};
+
+    use super::*;
+    use crate::rng::Sampler;
+    use crate::transform::Transform;
+
+    fn glowing(e: f32) -> Material {
+        Material {
+            emission: Color::splat(e),
+            ..Default::default()
+        }
+    }
+
+    /// Area of the ellipsoid with semi-axes `a`, by midpoint quadrature
+    /// of `|dp/dtheta x dp/dphi|` over a fine grid.
+    fn ellipsoid_area(a: Vec3) -> f64 {
+        let (nt, np) = (600, 1200);
+        let (dt, dp) = (
+            std::f64::consts::PI / nt as f64,
+            2.0 * std::f64::consts::PI / np as f64,
+        );
+        let (ax, ay, az) = (a.x as f64, a.y as f64, a.z as f64);
+        let mut sum = 0.0;
+        for i in 0..nt {
+            let t = (i as f64 + 0.5) * dt;
+            for j in 0..np {
+                let p = (j as f64 + 0.5) * dp;
+                let dtv = [
+                    ax * t.cos() * p.cos(),
+                    ay * t.cos() * p.sin(),
+                    -az * t.sin(),
+                ];
+                let dpv = [-ax * t.sin() * p.sin(), ay * t.sin() * p.cos(), 0.0];
+                let c = [
+                    dtv[1] * dpv[2] - dtv[2] * dpv[1],
+                    dtv[2] * dpv[0] - dtv[0] * dpv[2],
+                    dtv[0] * dpv[1] - dtv[1] * dpv[0],
+                ];
+                sum += (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() * dt * dp;
+            }
+        }
+        sum
+    }
+
+    /// `E[1 / pdf_area]` over the table's own samples is the total
+    /// emitting area: a check of every density, selection included.
+    #[test]
+    fn inverse_densities_average_to_the_emitting_area() {
+        let square = Shape::Polygon {
+            vertices: Arc::from(vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(2.0, 0.0, 0.0),
+                Vec3::new(2.0, 0.0, 1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ]),
+        };
+        let stretch = Vec3::new(1.5, 0.7, 0.4);
+        let instances = vec![
+            // Not emissive: never sampled.
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 1.0 }),
+                &Transform::default(),
+                0,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(square),
+                &Transform::from_trs(
+                    Vec3::new(0.0, 3.0, 0.0),
+                    Quat::from_rotation_x(0.3),
+                    Vec3::ONE,
+                ),
+                1,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Disk { radius: 0.5 }),
+                &Transform::from_trs(
+                    Vec3::new(4.0, 1.0, 0.0),
+                    Quat::IDENTITY,
+                    Vec3::new(2.0, 1.0, 3.0),
+                ),
+                2,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 0.8 }),
+                &Transform::from_trs(
+                    Vec3::new(-3.0, 1.0, 0.0),
+                    Quat::from_rotation_y(0.7),
+                    stretch,
+                ),
+                1,
+            ),
+        ];
+        let materials = vec![Material::default(), glowing(2.0), glowing(5.0)];
+        let table = EmitterTable::build(&instances, &materials);
+        assert_eq!(table.len(), 2 + 1 + 1);
+        let pi = std::f64::consts::PI;
+        let area = 2.0 + pi * 0.25 * 6.0 + ellipsoid_area(stretch * 0.8);
+        let n = 200_000;
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            let mut s = Sampler::new(1, i, 0);
+            let u = s.next_f32();
+            let v = Vec2::new(s.next_f32(), s.next_f32());
+            let es = table.sample(&instances, &materials, u, v).unwrap();
+            assert!((es.normal.length() - 1.0).abs() < 1e-4);
+            let x = 1.0 / es.pdf_area as f64;
+            sum += x;
+            sum2 += x * x;
+        }
+        let mean = sum / n as f64;
+        let err = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
+        assert!(
+            (mean - area).abs() < 5.0 * err + 1e-4 * area,
+            "mean 1/pdf {mean} vs area {area} (standard error {err})"
+        );
+        // Densities answered for hit points agree with the sampled ones.
+        assert_eq!(table.pdf_area(&instances, 0, Vec3A::ZERO), 0.0);
     }
 }
