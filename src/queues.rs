@@ -465,6 +465,73 @@ impl QueueBytes for ShadowQueue {
     }
 }
 
+/// Shadow rays kept as the per-chunk segments that produced them, in
+/// chunk order: a shading chunk hands its whole buffer over
+/// ([`ShadowSegments::take`]) instead of copying it into one long queue,
+/// and gets an empty, already allocated buffer back. Tracing reads the
+/// segments in order, so results do not depend on the thread count.
+#[derive(Clone, Debug, Default)]
+pub struct ShadowSegments {
+    segments: Vec<ShadowQueue>,
+    used: usize,
+}
+
+impl ShadowSegments {
+    /// Appends the rays of `q` as the next segment, leaving in `q` an
+    /// empty buffer (one of this queue's spares) for reuse.
+    pub fn take(&mut self, q: &mut ShadowQueue) {
+        if q.is_empty() {
+            return;
+        }
+        if self.used == self.segments.len() {
+            self.segments.push(ShadowQueue::default());
+        }
+        std::mem::swap(&mut self.segments[self.used], q);
+        self.used += 1;
+    }
+
+    /// Appends a copy of every shadow ray of `q`, in order.
+    pub fn append(&mut self, q: &ShadowQueue) {
+        if q.is_empty() {
+            return;
+        }
+        if self.used == self.segments.len() {
+            self.segments.push(ShadowQueue::default());
+        }
+        self.segments[self.used].append(q);
+        self.used += 1;
+    }
+
+    /// The segments in order.
+    pub fn segments(&self) -> &[ShadowQueue] {
+        &self.segments[..self.used]
+    }
+
+    /// Total number of shadow rays.
+    pub fn len(&self) -> usize {
+        self.segments().iter().map(|s| s.len()).sum()
+    }
+
+    /// True when no shadow ray is queued.
+    pub fn is_empty(&self) -> bool {
+        self.used == 0
+    }
+
+    /// Removes every ray, keeping the buffers.
+    pub fn clear(&mut self) {
+        for s in &mut self.segments[..self.used] {
+            s.clear();
+        }
+        self.used = 0;
+    }
+}
+
+impl QueueBytes for ShadowSegments {
+    fn bytes(&self) -> usize {
+        self.segments.iter().map(|s| s.bytes()).sum()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -27,7 +27,7 @@ use crate::integrator::wavefront::{
 };
 use crate::material::MaterialClass;
 use crate::math::Color;
-use crate::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowQueue};
+use crate::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowSegments};
 use crate::scene::RenderScene;
 
 /// Schedule run once at the start of each batch.
@@ -75,7 +75,7 @@ pub struct HitQueues(pub ClassQueues);
 
 /// Shadow rays of this bounce.
 #[derive(Resource, Default)]
-pub struct ShadowRays(pub ShadowQueue);
+pub struct ShadowRays(pub ShadowSegments);
 
 /// Radiance gathered so far by each path of the batch.
 #[derive(Resource, Default)]

@@ -28,6 +28,7 @@ use crate::packet::LANES;
 use crate::path::{self, LobeChoice};
 use crate::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
+    ShadowSegments,
 };
 use crate::rng::Sampler;
 use crate::scene::RenderScene;
@@ -275,7 +276,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     radiance: &mut [Color],
-    shadows: &mut ShadowQueue,
+    shadows: &mut ShadowSegments,
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
@@ -334,11 +335,11 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                 }
             }
         });
-    for out in &scratch[..chunks] {
+    for out in &mut scratch[..chunks] {
         for &(path, l) in &out.emitted {
             radiance[path as usize] += l;
         }
-        shadows.append(&out.shadows);
+        shadows.take(&mut out.shadows);
         next.append(&out.reflections);
         rays.add(&out.counts);
     }
@@ -358,7 +359,7 @@ pub fn shade_class(
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     radiance: &mut [Color],
-    shadows: &mut ShadowQueue,
+    shadows: &mut ShadowSegments,
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
@@ -397,7 +398,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     radiance: &mut [Color],
-    shadows: &mut ShadowQueue,
+    shadows: &mut ShadowSegments,
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
@@ -464,11 +465,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 }
             }
         });
-    for out in &scratch[..chunks] {
+    for out in &mut scratch[..chunks] {
         for &(path, l) in &out.emitted {
             radiance[path as usize] += l;
         }
-        shadows.append(&out.shadows);
+        shadows.take(&mut out.shadows);
         next.append(&out.reflections);
         rays.add(&out.counts);
     }
@@ -499,25 +500,39 @@ impl ShadowScratch {
 /// node test is SIMD across a node's eight children already.
 pub fn trace_shadow_rays(
     scene: &RenderScene,
-    shadows: &ShadowQueue,
+    shadows: &ShadowSegments,
     scratch: &mut ShadowScratch,
     radiance: &mut [Color],
 ) {
     let visible = &mut scratch.visible;
     visible.clear();
     visible.resize(shadows.len(), false);
-    visible
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(c, out)| {
-            for (i, v) in out.iter_mut().enumerate() {
-                let j = c * CHUNK + i;
-                *v = !scene.occluded(&shadows.ray(j), 0.0, shadows.t_max[j]);
+    // Work items of at most CHUNK rays, each within one segment, paired
+    // with their slice of the visibility flags (in queue order).
+    let mut work: Vec<(&ShadowQueue, usize, &mut [bool])> = Vec::new();
+    let mut rest: &mut [bool] = visible;
+    for seg in shadows.segments() {
+        let mut start = 0;
+        while start < seg.len() {
+            let n = (seg.len() - start).min(CHUNK);
+            let (head, tail) = rest.split_at_mut(n);
+            work.push((seg, start, head));
+            rest = tail;
+            start += n;
+        }
+    }
+    work.par_iter_mut().for_each(|(seg, start, out)| {
+        for (i, v) in out.iter_mut().enumerate() {
+            let j = *start + i;
+            *v = !scene.occluded(&seg.ray(j), 0.0, seg.t_max[j]);
+        }
+    });
+    let mut flags = visible.iter();
+    for seg in shadows.segments() {
+        for (&path, l) in seg.path.iter().zip(&seg.radiance) {
+            if *flags.next().expect("one flag per ray") {
+                radiance[path as usize] += *l;
             }
-        });
-    for (j, &v) in visible.iter().enumerate() {
-        if v {
-            radiance[shadows.path[j] as usize] += shadows.radiance[j];
         }
     }
 }
