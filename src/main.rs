@@ -304,7 +304,11 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let mut world = bevy_ecs::world::World::new();
     let mut schedule = systems::setup(&mut world);
     let cameras = systems::spawn_scene(&mut world, desc);
-    let bar = progress_bar(settings.height as u64, args.quiet);
+    let bar = progress_bar(
+        settings.height as u64,
+        args.quiet,
+        "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
+    );
     let progress: Option<systems::ProgressFn> = bar.clone().map(|b| {
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
@@ -401,18 +405,18 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     Ok(())
 }
 
-fn progress_bar(rows: u64, quiet: bool) -> Option<ProgressBar> {
+/// A progress bar on stderr of `total` steps drawn with the indicatif
+/// `template`, or `None` when `quiet`. It is hidden automatically when
+/// stderr is not a terminal.
+pub(crate) fn progress_bar(total: u64, quiet: bool, template: &str) -> Option<ProgressBar> {
     if quiet {
         return None;
     }
-    // Hidden automatically when stderr is not a terminal.
-    let bar = ProgressBar::with_draw_target(Some(rows), ProgressDrawTarget::stderr());
+    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
     bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
-        )
-        .map(|s| s.progress_chars("=> "))
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ProgressStyle::with_template(template)
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     Some(bar)
 }

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use clap::ValueEnum;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::ProgressBar;
 
 use prism::desc::{SceneDesc, SettingsDesc};
 use prism::error::{Error, Result};
@@ -502,7 +502,11 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     if given_reference.is_none() {
         total += reference_config.settings.height as u64 * reference_config.settings.spp as u64;
     }
-    let bar = progress_bar(total, args.quiet);
+    let bar = crate::progress_bar(
+        total,
+        args.quiet,
+        "{spinner} tradeoff [{bar:30}] {percent}% {elapsed_precise} (eta {eta}) {msg}",
+    );
 
     let reference = match given_reference {
         Some(f) => f,
@@ -607,21 +611,6 @@ fn print_table(rows: &[Row]) {
             if front.contains(&i) { "  pareto" } else { "" }
         );
     }
-}
-
-fn progress_bar(total: u64, quiet: bool) -> Option<ProgressBar> {
-    if quiet {
-        return None;
-    }
-    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} tradeoff [{bar:30}] {percent}% {elapsed_precise} (eta {eta}) {msg}",
-        )
-        .map(|s| s.progress_chars("=> "))
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    Some(bar)
 }
 
 #[cfg(test)]

@@ -257,8 +257,46 @@ impl ShadeOutput {
     }
 }
 
+impl ShadeOutput {
+    /// Queues a reflection or refraction ray and counts it.
+    #[inline]
+    fn push_secondary(&mut self, kind: RayKind, item: RayItem) {
+        if kind == RayKind::Refraction {
+            self.counts.refraction += 1;
+            self.refractions.push(item);
+        } else {
+            self.counts.reflection += 1;
+            self.reflections.push(item);
+        }
+    }
+}
+
 /// Per-chunk buffers of the shading stages.
 pub type ShadeScratch = Vec<ShadeOutput>;
+
+/// Joins the shading chunks' output in chunk order: emission into the
+/// paths' radiance, shadow segments handed over, then every chunk's
+/// reflection rays before every chunk's refraction rays (so neighbouring
+/// rays of the next bounce are alike).
+fn merge_shade_outputs(
+    outputs: &mut [ShadeOutput],
+    radiance: &mut [Color],
+    shadows: &mut ShadowSegments,
+    next: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    for out in outputs.iter_mut() {
+        for &(path, l) in &out.emitted {
+            radiance[path as usize] += l;
+        }
+        shadows.take(&mut out.shadows);
+        next.append(&out.reflections);
+        rays.add(&out.counts);
+    }
+    for out in outputs.iter() {
+        next.append(&out.refractions);
+    }
+}
 
 /// Stage: shades every hit of one material class. Emission goes straight
 /// to the path's radiance; lit classes push one shadow ray per light that
@@ -321,31 +359,12 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                             depth: h.depth + 1,
                             pdf: 0.0,
                         };
-                        match s.kind {
-                            RayKind::Refraction => {
-                                out.counts.refraction += 1;
-                                out.refractions.push(item);
-                            }
-                            RayKind::Reflection | RayKind::Camera => {
-                                out.counts.reflection += 1;
-                                out.reflections.push(item);
-                            }
-                        }
+                        out.push_secondary(s.kind, item);
                     }
                 }
             }
         });
-    for out in &mut scratch[..chunks] {
-        for &(path, l) in &out.emitted {
-            radiance[path as usize] += l;
-        }
-        shadows.take(&mut out.shadows);
-        next.append(&out.reflections);
-        rays.add(&out.counts);
-    }
-    for out in &scratch[..chunks] {
-        next.append(&out.refractions);
-    }
+    merge_shade_outputs(&mut scratch[..chunks], radiance, shadows, next, rays);
 }
 
 /// Shades the hits of `class` with the kernel for that class and the
@@ -452,30 +471,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                         depth: h.depth + 1,
                         pdf: cont.sample.pdf,
                     };
-                    match cont.sample.kind {
-                        RayKind::Refraction => {
-                            out.counts.refraction += 1;
-                            out.refractions.push(item);
-                        }
-                        RayKind::Reflection | RayKind::Camera => {
-                            out.counts.reflection += 1;
-                            out.reflections.push(item);
-                        }
-                    }
+                    out.push_secondary(cont.sample.kind, item);
                 }
             }
         });
-    for out in &mut scratch[..chunks] {
-        for &(path, l) in &out.emitted {
-            radiance[path as usize] += l;
-        }
-        shadows.take(&mut out.shadows);
-        next.append(&out.reflections);
-        rays.add(&out.counts);
-    }
-    for out in &scratch[..chunks] {
-        next.append(&out.refractions);
-    }
+    merge_shade_outputs(&mut scratch[..chunks], radiance, shadows, next, rays);
 }
 
 /// Reusable buffers of [`trace_shadow_rays`].
