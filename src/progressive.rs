@@ -15,10 +15,9 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::film::Film;
-use crate::integrator::recursive::{trace, trace_path};
-use crate::integrator::{MAX_SPP, RenderSettings, Transport, accumulate, camera_rays, film_sample};
+use crate::integrator::recursive::pixel_sample;
+use crate::integrator::{MAX_SPP, RenderSettings, accumulate, camera_rays};
 use crate::math::Color;
-use crate::rng::Sampler;
 use crate::scene::RenderScene;
 use crate::stats::RenderCounters;
 
@@ -97,20 +96,15 @@ impl Accumulator {
             .map(|(y, (sums, valids))| {
                 let mut counters = RenderCounters::default();
                 for (x, (sum, valid)) in sums.iter_mut().zip(valids.iter_mut()).enumerate() {
-                    let pixel = (y * width + x) as u32;
                     for s in first..total {
-                        let mut sampler = Sampler::new(settings.seed, pixel, s);
-                        let p = film_sample(x as u32, y as u32, total, &mut sampler);
-                        let ray = cam.ray(p);
-                        counters.rays.camera += 1;
-                        let l = match settings.transport {
-                            Transport::Whitted => {
-                                trace(scene, settings, &ray, 0, Color::ONE, &mut counters)
-                            }
-                            Transport::Path => {
-                                trace_path(scene, settings, &ray, &mut sampler, &mut counters)
-                            }
-                        };
+                        let l = pixel_sample(
+                            scene,
+                            settings,
+                            &cam,
+                            (x as u32, y as u32),
+                            (s, total),
+                            &mut counters,
+                        );
                         accumulate(sum, valid, l, &mut counters);
                     }
                 }

@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::{Progress, RenderSettings, Transport, accumulate, camera_rays, film_sample};
-use crate::camera::Camera;
+use crate::camera::{Camera, CameraRays};
 use crate::film::Film;
 use crate::math::{Color, Ray, max_component};
 use crate::path::{self, LobeChoice};
@@ -103,6 +103,27 @@ pub fn trace_path(
     }
 }
 
+/// Radiance of sample `s` of the `spp` samples of pixel `(x, y)`: its
+/// camera ray, traced with the settings' transport. Its random numbers
+/// are keyed by (seed, pixel, sample).
+pub fn pixel_sample(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    (x, y): (u32, u32),
+    (s, spp): (u32, u32),
+    counters: &mut RenderCounters,
+) -> Color {
+    let pixel = y * settings.width + x;
+    let mut sampler = Sampler::new(settings.seed, pixel, s);
+    let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
+    counters.rays.camera += 1;
+    match settings.transport {
+        Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Path => trace_path(scene, settings, &ray, &mut sampler, counters),
+    }
+}
+
 /// Renders every pixel with the recursive tracer, rows in parallel.
 pub fn render(
     scene: &RenderScene,
@@ -120,22 +141,17 @@ pub fn render(
         .map(|(y, row)| {
             let mut counters = RenderCounters::default();
             for (x, px) in row.iter_mut().enumerate() {
-                let pixel = (y * width + x) as u32;
                 let mut sum = Color::ZERO;
                 let mut valid = 0;
                 for s in 0..settings.spp {
-                    let mut sampler = Sampler::new(settings.seed, pixel, s);
-                    let p = film_sample(x as u32, y as u32, settings.spp, &mut sampler);
-                    let ray = cam.ray(p);
-                    counters.rays.camera += 1;
-                    let l = match settings.transport {
-                        Transport::Whitted => {
-                            trace(scene, settings, &ray, 0, Color::ONE, &mut counters)
-                        }
-                        Transport::Path => {
-                            trace_path(scene, settings, &ray, &mut sampler, &mut counters)
-                        }
-                    };
+                    let l = pixel_sample(
+                        scene,
+                        settings,
+                        &cam,
+                        (x as u32, y as u32),
+                        (s, settings.spp),
+                        &mut counters,
+                    );
                     accumulate(&mut sum, &mut valid, l, &mut counters);
                 }
                 *px = if valid > 0 {
