@@ -283,6 +283,13 @@ impl RenderScene {
     /// `(0, inf)`), by packet traversal of the top-level BVH and of mesh
     /// BVHs: the same hits as [`RenderScene::intersect`] on each ray.
     pub fn intersect_packet(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        self.intersect_packet_with(rays, out, true)
+    }
+
+    /// [`RenderScene::intersect_packet`], with the top level traversed as a
+    /// packet and each mesh either as a packet (`mesh_packets`) or one lane
+    /// at a time, for rays too incoherent to share a mesh's nodes.
+    pub fn intersect_packet_with(&self, rays: &[Ray], out: &mut [Option<Hit>], mesh_packets: bool) {
         let n = rays.len().min(LANES);
         let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
         let mut t_max = [f32::INFINITY; LANES];
@@ -304,6 +311,13 @@ impl RenderScene {
                     if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
                         p.t_max[l] = h.t;
                         best[l] = Some((h.t, index, LocalHit::shape(&h)));
+                    }
+                }),
+                InstanceGeometry::Mesh(m) if !mesh_packets => for_each_lane(lanes, |l| {
+                    let local = to_object(inst, &p.rays[l]);
+                    if let Some(h) = m.intersect(&local, p.t_min[l], p.t_max[l]) {
+                        p.t_max[l] = h.t;
+                        best[l] = Some((h.t, index, LocalHit::Mesh(h)));
                     }
                 }),
                 InstanceGeometry::Mesh(m) => {

@@ -289,7 +289,8 @@ fn empty_and_degenerate_scenes() {
 
 /// Packet traversal must find exactly what single-ray traversal finds,
 /// for coherent packets (shared origin, nearby directions) and for
-/// incoherent ones, including partly filled packets.
+/// incoherent ones, including partly filled packets, whether meshes are
+/// traversed as packets or one lane at a time.
 #[test]
 fn packets_equal_single_rays() {
     use prism::packet::LANES;
@@ -312,6 +313,10 @@ fn packets_equal_single_rays() {
         };
         let mut out = [None; LANES];
         scene.intersect_packet(&rays, &mut out);
+        // The top level as a packet, meshes one lane at a time: the same.
+        let mut hybrid = [None; LANES];
+        scene.intersect_packet_with(&rays, &mut hybrid, false);
+        assert_eq!(out, hybrid, "packet {k}: mesh lanes one at a time");
         let t_max: Vec<f32> = (0..n).map(|_| rng.range(0.5, 30.0)).collect();
         let blocked = scene.occluded_packet(&rays, &t_max);
         assert_eq!(blocked >> n, 0, "unused lanes are never blocked");

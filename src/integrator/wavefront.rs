@@ -173,28 +173,20 @@ pub fn intersect_closest(
             }
             let end = ((c + 1) * CHUNK).min(rays.len());
             let mut found = [None; LANES];
-            let mut coherent = false;
             for i in c * CHUNK..end {
                 let lane = (i - c * CHUNK) % LANES;
                 if lane == 0 {
-                    // Camera rays of neighbouring pixels are traced as one
-                    // packet. Other rays go alone: for them, packets were
-                    // measured slower than single rays, whose node test is
-                    // SIMD across a node's children (see the README).
+                    // Eight neighbouring rays go through the top level as
+                    // one packet. Camera rays of neighbouring pixels also
+                    // share mesh nodes and traverse meshes as a packet;
+                    // secondary rays traverse meshes one lane at a time,
+                    // which measured faster for them than mesh packets
+                    // (see the README).
                     let n = (end - i).min(LANES);
-                    coherent = rays.depth[i] == 0;
-                    if coherent {
-                        let packet: [Ray; LANES] =
-                            std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                        scene.intersect_packet(&packet[..n], &mut found);
-                    }
+                    let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
+                    scene.intersect_packet_with(&packet[..n], &mut found, rays.depth[i] == 0);
                 }
-                let hit = if coherent {
-                    found[lane]
-                } else {
-                    scene.intersect(&rays.ray(i), 0.0, f32::INFINITY)
-                };
-                match hit {
+                match found[lane] {
                     None => esc.push(rays.path[i], rays.throughput[i]),
                     Some(h) => {
                         let class = classes[h.material as usize];
