@@ -346,6 +346,17 @@ impl RenderScene {
     /// of those blocked by anything: the same answers as
     /// [`RenderScene::occluded`] on each.
     pub fn occluded_packet(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+        self.occluded_packet_with(rays, t_max, true)
+    }
+
+    /// [`RenderScene::occluded_packet`], with meshes traversed as a packet
+    /// (`mesh_packets`) or one lane at a time.
+    pub fn occluded_packet_with(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+        mesh_packets: bool,
+    ) -> LaneMask {
         let n = rays.len().min(LANES);
         let mut blocked: LaneMask = 0;
         for (l, ray) in rays[..n].iter().enumerate() {
@@ -368,6 +379,16 @@ impl RenderScene {
                     for_each_lane(lanes, |l| {
                         let local = to_object(inst, &p.rays[l]);
                         if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                            now |= 1 << l;
+                        }
+                    });
+                    now
+                }
+                InstanceGeometry::Mesh(m) if !mesh_packets => {
+                    let mut now = 0;
+                    for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if m.occluded(&local, p.t_min[l], p.t_max[l]) {
                             now |= 1 << l;
                         }
                     });

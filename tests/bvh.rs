@@ -320,6 +320,11 @@ fn packets_equal_single_rays() {
         let t_max: Vec<f32> = (0..n).map(|_| rng.range(0.5, 30.0)).collect();
         let blocked = scene.occluded_packet(&rays, &t_max);
         assert_eq!(blocked >> n, 0, "unused lanes are never blocked");
+        assert_eq!(
+            scene.occluded_packet_with(&rays, &t_max, false),
+            blocked,
+            "shadow packet {k}: mesh lanes one at a time"
+        );
         for (l, ray) in rays.iter().enumerate() {
             let single = scene.intersect(ray, 0.0, f32::INFINITY);
             match (out[l], single) {

@@ -486,10 +486,11 @@ impl ShadowScratch {
 /// Stage: traces every shadow ray, stopping at the first blocker, and adds
 /// the radiance of the unblocked ones to their paths, in queue order.
 ///
-/// Shadow rays are traced one at a time: binning them by light and
-/// tracing packs of eight was measured slower (`many_lights`: 0.78-0.86x
-/// of single rays with packets, see the README), because the single-ray
-/// node test is SIMD across a node's eight children already.
+/// Eight consecutive shadow rays (mostly one hit point's rays to eight
+/// lights) go through the top level as a packet, and each lane traverses
+/// meshes alone: whole packets, also with rays binned by light, were
+/// measured slower than single rays, because the single-ray node test is
+/// SIMD across a node's eight children already.
 pub fn trace_shadow_rays(
     scene: &RenderScene,
     shadows: &ShadowSegments,
@@ -514,9 +515,17 @@ pub fn trace_shadow_rays(
         }
     }
     work.par_iter_mut().for_each(|(seg, start, out)| {
-        for (i, v) in out.iter_mut().enumerate() {
-            let j = *start + i;
-            *v = !scene.occluded(&seg.ray(j), 0.0, seg.t_max[j]);
+        for (k, lanes) in out.chunks_mut(LANES).enumerate() {
+            let j = *start + k * LANES;
+            let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(lanes.len() - 1)));
+            let blocked = scene.occluded_packet_with(
+                &rays[..lanes.len()],
+                &seg.t_max[j..j + lanes.len()],
+                false,
+            );
+            for (l, v) in lanes.iter_mut().enumerate() {
+                *v = blocked & (1 << l) == 0;
+            }
         }
     });
     let mut flags = visible.iter();
