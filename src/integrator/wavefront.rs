@@ -35,7 +35,7 @@ use crate::scene::RenderScene;
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
-use crate::shading::{Interaction, RayKind, direct_light, scatter};
+use crate::shading::{Interaction, RayKind, ShadowQuery, direct_light, scatter};
 use crate::stats::{RayCounts, RenderCounters};
 
 /// Items per parallel work chunk: large enough to amortise scheduling,
@@ -250,6 +250,18 @@ impl ShadeOutput {
 }
 
 impl ShadeOutput {
+    /// Queues the shadow ray of `q` for hit `h` and counts it.
+    #[inline]
+    fn push_shadow(&mut self, h: &HitItem, q: ShadowQuery) {
+        self.counts.shadow += 1;
+        self.shadows.push(ShadowItem {
+            ray: q.ray,
+            t_max: q.t_max,
+            radiance: h.throughput * q.radiance,
+            path: h.path,
+        });
+    }
+
     /// Queues a reflection or refraction ray and counts it.
     #[inline]
     fn push_secondary(&mut self, kind: RayKind, item: RayItem) {
@@ -265,6 +277,41 @@ impl ShadeOutput {
 
 /// Per-chunk buffers of the shading stages.
 pub type ShadeScratch = Vec<ShadeOutput>;
+
+/// The queues a shading stage adds to: path radiance, shadow rays, next
+/// rays and ray counts.
+type ShadeTargets<'a> = (
+    &'a mut [Color],
+    &'a mut ShadowSegments,
+    &'a mut RayQueue,
+    &'a mut RayCounts,
+);
+
+/// Runs `kernel` on every hit of `hits` with its interaction, in parallel
+/// chunks of [`CHUNK`] hits each writing its own [`ShadeOutput`], then joins
+/// the outputs in chunk order.
+fn shade_hits(
+    scene: &RenderScene,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    (radiance, shadows, next, rays): ShadeTargets<'_>,
+    kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
+) {
+    let chunks = hits.len().div_ceil(CHUNK);
+    chunk_buffers(scratch, hits.len())
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(c, out)| {
+            out.clear();
+            let end = ((c + 1) * CHUNK).min(hits.len());
+            for i in c * CHUNK..end {
+                let h = hits.get(i);
+                let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+                kernel(&h, &it, out);
+            }
+        });
+    merge_shade_outputs(&mut scratch[..chunks], radiance, shadows, next, rays);
+}
 
 /// Joins the shading chunks' output in chunk order: emission into the
 /// paths' radiance, shadow segments handed over, then every chunk's
@@ -310,53 +357,36 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    let chunks = hits.len().div_ceil(CHUNK);
-    chunk_buffers(scratch, hits.len())
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(c, out)| {
-            out.clear();
-            let end = ((c + 1) * CHUNK).min(hits.len());
-            for i in c * CHUNK..end {
-                let h = hits.get(i);
-                let hit = h.hit();
-                let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &hit);
-                if it.surface.emission != Color::ZERO {
-                    out.emitted
-                        .push((h.path, h.throughput * it.surface.emission));
-                }
-                if LIT && it.is_lit_by_lights() {
-                    for light in &scene.lights {
-                        if let Some(q) = direct_light(&it, light) {
-                            out.counts.shadow += 1;
-                            out.shadows.push(ShadowItem {
-                                ray: q.ray,
-                                t_max: q.t_max,
-                                radiance: h.throughput * q.radiance,
-                                path: h.path,
-                            });
-                        }
-                    }
-                }
-                if SCATTER && h.depth < settings.max_depth {
-                    for s in scatter(&it).into_iter().flatten() {
-                        let t = h.throughput * s.weight;
-                        if max_component(t) < settings.min_contribution {
-                            continue;
-                        }
-                        let item = RayItem {
-                            ray: s.ray,
-                            throughput: t,
-                            path: h.path,
-                            depth: h.depth + 1,
-                            pdf: 0.0,
-                        };
-                        out.push_secondary(s.kind, item);
-                    }
+    let outputs = (radiance, shadows, next, rays);
+    shade_hits(scene, hits, scratch, outputs, |h, it, out| {
+        if it.surface.emission != Color::ZERO {
+            out.emitted
+                .push((h.path, h.throughput * it.surface.emission));
+        }
+        if LIT && it.is_lit_by_lights() {
+            for light in &scene.lights {
+                if let Some(q) = direct_light(it, light) {
+                    out.push_shadow(h, q);
                 }
             }
-        });
-    merge_shade_outputs(&mut scratch[..chunks], radiance, shadows, next, rays);
+        }
+        if SCATTER && h.depth < settings.max_depth {
+            for s in scatter(it).into_iter().flatten() {
+                let t = h.throughput * s.weight;
+                if max_component(t) < settings.min_contribution {
+                    continue;
+                }
+                let item = RayItem {
+                    ray: s.ray,
+                    throughput: t,
+                    path: h.path,
+                    depth: h.depth + 1,
+                    pdf: 0.0,
+                };
+                out.push_secondary(s.kind, item);
+            }
+        }
+    });
 }
 
 /// Shades the hits of `class` with the kernel for that class and the
@@ -413,61 +443,38 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     next: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    let chunks = hits.len().div_ceil(CHUNK);
     let spp = settings.spp as u64;
-    chunk_buffers(scratch, hits.len())
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(c, out)| {
-            out.clear();
-            let end = ((c + 1) * CHUNK).min(hits.len());
-            for i in c * CHUNK..end {
-                let h = hits.get(i);
-                let hit = h.hit();
-                let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &hit);
-                let e = path::emitted(scene, settings, &it, h.instance, h.pdf, h.distance);
-                if e != Color::ZERO {
-                    out.emitted.push((h.path, h.throughput * e));
-                }
-                if !NEE && !SCATTER {
-                    continue;
-                }
-                let p = first + h.path as u64;
-                let mut sampler = Sampler::new(settings.seed, (p / spp) as u32, (p % spp) as u32);
-                let lobes = LobeChoice::new(&it);
-                if NEE {
-                    path::next_event(scene, settings, &it, &lobes, &mut sampler, h.depth, |q| {
-                        out.counts.shadow += 1;
-                        out.shadows.push(ShadowItem {
-                            ray: q.ray,
-                            t_max: q.t_max,
-                            radiance: h.throughput * q.radiance,
-                            path: h.path,
-                        });
-                    });
-                }
-                if SCATTER
-                    && let Some(cont) = path::continue_path(
-                        settings,
-                        &it,
-                        &lobes,
-                        h.depth,
-                        h.throughput,
-                        &mut sampler,
-                    )
-                {
-                    let item = RayItem {
-                        ray: cont.sample.ray,
-                        throughput: h.throughput * cont.sample.weight * cont.scale,
-                        path: h.path,
-                        depth: h.depth + 1,
-                        pdf: cont.sample.pdf,
-                    };
-                    out.push_secondary(cont.sample.kind, item);
-                }
-            }
-        });
-    merge_shade_outputs(&mut scratch[..chunks], radiance, shadows, next, rays);
+    let outputs = (radiance, shadows, next, rays);
+    shade_hits(scene, hits, scratch, outputs, |h, it, out| {
+        let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
+        if e != Color::ZERO {
+            out.emitted.push((h.path, h.throughput * e));
+        }
+        if !NEE && !SCATTER {
+            return;
+        }
+        let p = first + h.path as u64;
+        let mut sampler = Sampler::new(settings.seed, (p / spp) as u32, (p % spp) as u32);
+        let lobes = LobeChoice::new(it);
+        if NEE {
+            path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
+                out.push_shadow(h, q)
+            });
+        }
+        if SCATTER
+            && let Some(cont) =
+                path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
+        {
+            let item = RayItem {
+                ray: cont.sample.ray,
+                throughput: h.throughput * cont.sample.weight * cont.scale,
+                path: h.path,
+                depth: h.depth + 1,
+                pdf: cont.sample.pdf,
+            };
+            out.push_secondary(cont.sample.kind, item);
+        }
+    });
 }
 
 /// Reusable buffers of [`trace_shadow_rays`].
