@@ -17,7 +17,7 @@ use prism::math::{Ray, orthonormal_basis};
 use prism::mesh::BuildQuality;
 use prism::packet::LANES;
 use prism::rng::Sampler;
-use prism::scene::RenderScene;
+use prism::scene::{RenderScene, StreamScratch};
 use prism::stats::RayCountsJson;
 use prism::systems::{self, Frame, RenderConfig};
 
@@ -98,6 +98,10 @@ pub struct Throughput {
     /// The same packets through the top level, meshes one lane at a time
     /// (what the wavefront does with secondary rays).
     pub secondary_top_level_packets: f64,
+    /// The same secondary rays through the top level in packets and every
+    /// mesh as streams of 1024 rays split by direction octant (what the
+    /// wavefront does with secondary rays).
+    pub secondary_streams: f64,
     /// Number of secondary rays.
     pub secondary_rays: usize,
 }
@@ -279,6 +283,20 @@ fn trace_packets(scene: &RenderScene, rays: &[Ray], mesh_packets: bool) -> usize
         .sum()
 }
 
+fn trace_streams(scene: &RenderScene, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map_init(
+            || (StreamScratch::default(), Vec::new()),
+            |(scratch, out), c| {
+                out.clear();
+                out.resize(c.len(), None);
+                scene.intersect_stream(c, out, scratch);
+                out.iter().filter(|h| h.is_some()).count()
+            },
+        )
+        .sum()
+}
+
 /// Closest-hit throughput of camera rays and of incoherent secondary rays
 /// leaving the camera rays' hits in cosine-distributed directions.
 fn throughput(
@@ -328,6 +346,9 @@ fn throughput(
         }),
         secondary_top_level_packets: best_rate(secondary.len(), runs, || {
             std::hint::black_box(trace_packets(scene, &secondary, false));
+        }),
+        secondary_streams: best_rate(secondary.len(), runs, || {
+            std::hint::black_box(trace_streams(scene, &secondary));
         }),
         secondary_rays: secondary.len(),
     }
@@ -380,13 +401,14 @@ fn print_table(r: &SceneResult) {
     );
     let t = r.closest_hit_mrays;
     println!(
-        "  closest-hit Mrays/s: camera rays {:.2} single, {:.2} packets; secondary rays ({}) {:.2} single, {:.2} packets, {:.2} top-level packets",
+        "  closest-hit Mrays/s: camera rays {:.2} single, {:.2} packets; secondary rays ({}) {:.2} single, {:.2} packets, {:.2} top-level packets, {:.2} streams",
         t.camera_single,
         t.camera_packets,
         t.secondary_rays,
         t.secondary_single,
         t.secondary_packets,
-        t.secondary_top_level_packets
+        t.secondary_top_level_packets,
+        t.secondary_streams
     );
     println!();
 }

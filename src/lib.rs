@@ -47,6 +47,7 @@ pub mod scene;
 pub mod shading;
 pub mod shapes;
 pub mod stats;
+pub mod stream;
 pub mod tlas;
 pub mod transform;
 

@@ -9,6 +9,7 @@ use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbv
 
 use crate::math::Ray;
 use crate::packet::{LANES, LaneMask, Packet, for_each_lane};
+use crate::stream::Stream;
 
 /// How a mesh's shading normal is chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -689,6 +690,37 @@ impl Mesh {
             now
         });
         blocked
+    }
+
+    /// Closest hits of every ray of `stream` (object space), by stream
+    /// traversal ([`crate::stream`]): `best[i]` is ray `i`'s nearest hit
+    /// inside its interval, as [`Mesh::intersect`] finds it. `wt` is a
+    /// reusable buffer.
+    pub fn intersect_stream(
+        &self,
+        stream: &mut Stream,
+        wt: &mut Vec<WatertightRay>,
+        best: &mut Vec<Option<MeshHit>>,
+    ) {
+        wt.clear();
+        wt.extend(stream.rays.iter().map(WatertightRay::new));
+        best.clear();
+        best.resize(stream.len(), None);
+        crate::stream::traverse(&self.bvh, stream, |slot, ids, s| {
+            let [p0, p1, p2] = self.corners[slot];
+            for &r in ids {
+                let r = r as usize;
+                if let Some((t, b1, b2)) = wt[r].intersect(p0, p1, p2, s.t_min[r], s.t_max[r]) {
+                    s.t_max[r] = t;
+                    best[r] = Some(MeshHit {
+                        t,
+                        triangle: slot as u32,
+                        b1,
+                        b2,
+                    });
+                }
+            }
+        });
     }
 
     /// Closest hit by testing every triangle: the reference for BVH tests.

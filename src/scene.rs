@@ -18,6 +18,18 @@ use crate::shapes::Shape;
 use crate::tlas::{Tlas, TlasCounters, TlasPolicy, TlasUpdate};
 use crate::transform::{InstanceTransform, Transform};
 
+/// Buffers of [`RenderScene::intersect_stream`], kept between calls so
+/// that tracing allocates nothing once they have grown.
+#[derive(Debug, Default)]
+pub struct StreamScratch {
+    best: Vec<Option<(f32, u32, LocalHit)>>,
+    /// (instance << 35 | octant << 32 | ray) of rays reaching a mesh.
+    deferred: Vec<u64>,
+    stream: crate::stream::Stream,
+    wt: Vec<crate::mesh::WatertightRay>,
+    mesh_hits: Vec<Option<crate::mesh::MeshHit>>,
+}
+
 /// The geometry of one instance.
 #[derive(Clone, Debug)]
 pub enum InstanceGeometry {
@@ -339,6 +351,93 @@ impl RenderScene {
         });
         for (l, o) in out[..n].iter_mut().enumerate() {
             *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
+        }
+    }
+
+    /// Closest hits of all `rays` (each searched in `(0, inf)`), by
+    /// streams: the top level is traversed in packets of eight
+    /// consecutive rays, shapes are intersected there, and every ray that
+    /// reaches a mesh instance joins that instance's stream for its
+    /// direction octant; each stream then traverses the mesh's BVH at once
+    /// ([`crate::stream`]). The same hits as [`RenderScene::intersect`] on
+    /// each ray. `scratch` keeps the buffers between calls.
+    pub fn intersect_stream(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+        scratch: &mut StreamScratch,
+    ) {
+        let n = rays.len();
+        let StreamScratch {
+            best,
+            deferred,
+            stream,
+            wt,
+            mesh_hits,
+        } = scratch;
+        best.clear();
+        best.resize(n, None);
+        deferred.clear();
+        for (p, rays) in rays.chunks(LANES).enumerate() {
+            let first = p * LANES;
+            let mut t_max = [f32::INFINITY; LANES];
+            for (l, ray) in rays.iter().enumerate() {
+                for &i in &self.tlas.unbounded {
+                    if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
+                        t_max[l] = t;
+                        best[first + l] = Some((t, i, h));
+                    }
+                }
+            }
+            let mut packet = Packet::new(rays, &[0.0; LANES][..rays.len()], &t_max[..rays.len()]);
+            packet::traverse(&self.tlas.cw, &mut packet, ALL_LANES, |p, lanes, slot| {
+                let index = self.tlas.leaf_instances[slot];
+                let inst = &self.instances[index as usize];
+                match &inst.geometry {
+                    InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
+                            p.t_max[l] = h.t;
+                            best[first + l] = Some((h.t, index, LocalHit::shape(&h)));
+                        }
+                    }),
+                    InstanceGeometry::Mesh(_) => for_each_lane(lanes, |l| {
+                        let d = inst.transform.to_object.transform_vector3a(p.rays[l].direction);
+                        let octant = (d.x < 0.0) as u64
+                            | ((d.y < 0.0) as u64) << 1
+                            | ((d.z < 0.0) as u64) << 2;
+                        deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
+                    }),
+                }
+                0
+            });
+        }
+        // One stream per (instance, octant), in a fixed order.
+        deferred.sort_unstable();
+        let mut rest = &deferred[..];
+        while let Some(&key) = rest.first() {
+            let group = rest.partition_point(|&k| k >> 32 == key >> 32);
+            let index = (key >> 35) as u32;
+            let inst = &self.instances[index as usize];
+            let InstanceGeometry::Mesh(mesh) = &inst.geometry else {
+                unreachable!("only meshes are deferred")
+            };
+            stream.clear();
+            for &k in &rest[..group] {
+                let i = (k & 0xffff_ffff) as usize;
+                let t_max = best[i].as_ref().map_or(f32::INFINITY, |b| b.0);
+                stream.push(to_object(inst, &rays[i]), 0.0, t_max);
+            }
+            mesh.intersect_stream(stream, wt, mesh_hits);
+            for (&k, h) in rest[..group].iter().zip(mesh_hits.iter()) {
+                if let Some(h) = h {
+                    best[(k & 0xffff_ffff) as usize] = Some((h.t, index, LocalHit::Mesh(*h)));
+                }
+            }
+            rest = &rest[group..];
+        }
+        for (o, b) in out[..n].iter_mut().zip(best.iter()) {
+            *o = b.map(|(t, i, h)| self.finish_hit(t, i, h));
         }
     }
 

@@ -349,3 +349,54 @@ fn packets_equal_single_rays() {
         "{checked} rays, {hits} hits"
     );
 }
+
+/// Stream traversal (the wavefront's secondary rays) must find what
+/// single-ray traversal finds: for rays from outside, rays from anywhere
+/// inside the scene, and rays leaving hit points on either side of the
+/// surface (reflection and refraction rays, which start on a mesh and
+/// often end on the same mesh), in streams of every size from one ray up.
+#[test]
+fn streams_equal_single_rays() {
+    use prism::scene::StreamScratch;
+    let mut rng = Rng::new(7);
+    let scene = random_scene(&mut rng, true);
+    let mut rays = Vec::new();
+    while rays.len() < 6000 {
+        let o = rng.dir() * 15.0;
+        let target = rng.vec(-6.0, 6.0);
+        let ray = Ray::new(o.into(), (target - o).normalize().into());
+        rays.push(ray);
+        rays.push(Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()));
+        if let Some(h) = scene.intersect(&ray, 0.0, f32::INFINITY) {
+            // Leave the hit point into either side, like a bounce does.
+            let n = h.geometric_normal.normalize();
+            let d: Vec3A = rng.dir().into();
+            let side = if d.dot(n) > 0.0 { n } else { -n };
+            rays.push(Ray::new(prism::optics::offset_origin(h.point, side), d));
+        }
+    }
+    let mut scratch = StreamScratch::default();
+    let mut hits = 0;
+    let mut start = 0;
+    let mut size = 1;
+    while start < rays.len() {
+        let end = (start + size).min(rays.len());
+        let mut out = vec![None; end - start];
+        scene.intersect_stream(&rays[start..end], &mut out, &mut scratch);
+        for (k, ray) in rays[start..end].iter().enumerate() {
+            let single = scene.intersect(ray, 0.0, f32::INFINITY);
+            match (out[k], single) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert_eq!(a.t, b.t, "ray {}", start + k);
+                    assert_eq!(a.instance, b.instance, "ray {}", start + k);
+                }
+                (a, b) => panic!("ray {}: stream {a:?} single {b:?}", start + k),
+            }
+        }
+        start = end;
+        size = size * 3 + 1;
+    }
+    assert!(hits > 3000, "{hits} hits");
+}

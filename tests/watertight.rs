@@ -726,3 +726,36 @@ fn packet_traversal_has_no_leaks() {
         "{differ} of 200000 rays differ between packet and single-ray traversal"
     );
 }
+
+/// Stream traversal uses the same conservative box margin: rays aimed at
+/// the cube's shared edges and vertices, from near and far, find exactly
+/// the single-ray hits (streams of 1000 rays, any direction octant mixed).
+#[test]
+fn stream_traversal_has_no_leaks() {
+    use prism::stream::Stream;
+    let solid = cube("unit cube", Vec3::ZERO, 1.0, Quat::IDENTITY);
+    let mesh = solid.mesh();
+    let mut rng = Rng(16);
+    let mut stream = Stream::default();
+    let (mut wt, mut best) = (Vec::new(), Vec::new());
+    let mut differ = 0;
+    for _ in 0..200 {
+        stream.clear();
+        for _ in 0..1000 {
+            let a = solid.positions[rng.next_u64() as usize % 8];
+            let b = solid.positions[rng.next_u64() as usize % 8];
+            let target = a + (b - a) * rng.f();
+            let o = target + rng.dir() * 10f32.powf(rng.range(0.0, 3.0));
+            stream.push(Ray::new(o.into(), (target - o).into()), 0.0, f32::INFINITY);
+        }
+        mesh.intersect_stream(&mut stream, &mut wt, &mut best);
+        for (ray, b) in stream.rays.iter().zip(&best) {
+            let single = mesh.intersect(ray, 0.0, f32::INFINITY).map(|h| h.t);
+            differ += (single != b.map(|h| h.t)) as usize;
+        }
+    }
+    assert_eq!(
+        differ, 0,
+        "{differ} of 200000 rays differ between stream and single-ray traversal"
+    );
+}

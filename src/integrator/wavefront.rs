@@ -31,10 +31,18 @@ use crate::queues::{
     ShadowSegments,
 };
 use crate::rng::Sampler;
-use crate::scene::RenderScene;
+use crate::scene::{Hit, RenderScene, StreamScratch};
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
-pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues)>;
+pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues, StreamBuffers)>;
+
+/// One chunk's buffers for tracing its rays as streams.
+#[derive(Debug, Default)]
+pub struct StreamBuffers {
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    scratch: StreamScratch,
+}
 use crate::shading::{Interaction, RayKind, ShadowQuery, direct_light, scatter};
 use crate::stats::{RayCounts, RenderCounters};
 
@@ -166,36 +174,51 @@ pub fn intersect_closest(
     chunk_buffers(scratch, rays.len())
         .par_iter_mut()
         .enumerate()
-        .for_each(|(c, (esc, local))| {
+        .for_each(|(c, (esc, local, streams))| {
             esc.clear();
             for q in &mut local.queues {
                 q.clear();
             }
             let end = ((c + 1) * CHUNK).min(rays.len());
+            let mut route = |i: usize, found: Option<Hit>| match found {
+                None => esc.push(rays.path[i], rays.throughput[i]),
+                Some(h) => {
+                    let class = classes[h.material as usize];
+                    local.queues[class as usize].push(HitItem::new(&h, &rays.get(i)));
+                }
+            };
+            if rays.depth[c * CHUNK] > 0 {
+                // Secondary rays: the top level in packets of eight, then
+                // every mesh with one stream per direction octant for the
+                // whole chunk (see `crate::stream`): incoherent rays share
+                // the upper nodes of a mesh even when packets of eight do
+                // not.
+                let StreamBuffers { rays: r, hits, scratch } = streams;
+                r.clear();
+                r.extend((c * CHUNK..end).map(|i| rays.ray(i)));
+                hits.clear();
+                hits.resize(r.len(), None);
+                scene.intersect_stream(r, hits, scratch);
+                for (k, h) in hits.iter().enumerate() {
+                    route(c * CHUNK + k, *h);
+                }
+                return;
+            }
             let mut found = [None; LANES];
             for i in c * CHUNK..end {
                 let lane = (i - c * CHUNK) % LANES;
                 if lane == 0 {
-                    // Eight neighbouring rays go through the top level as
-                    // one packet. Camera rays of neighbouring pixels also
-                    // share mesh nodes and traverse meshes as a packet;
-                    // secondary rays traverse meshes one lane at a time,
-                    // which measured faster for them than mesh packets
-                    // (see the README).
+                    // Camera rays: eight neighbouring pixels share the
+                    // top level and mesh nodes, and go through both as
+                    // one packet.
                     let n = (end - i).min(LANES);
                     let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                    scene.intersect_packet_with(&packet[..n], &mut found, rays.depth[i] == 0);
+                    scene.intersect_packet_with(&packet[..n], &mut found, true);
                 }
-                match found[lane] {
-                    None => esc.push(rays.path[i], rays.throughput[i]),
-                    Some(h) => {
-                        let class = classes[h.material as usize];
-                        local.queues[class as usize].push(HitItem::new(&h, &rays.get(i)));
-                    }
-                }
+                route(i, found[lane]);
             }
         });
-    for (esc, local) in &scratch[..chunks] {
+    for (esc, local, _) in &scratch[..chunks] {
         escaped.append(esc);
         for (q, l) in hits.queues.iter_mut().zip(&local.queues) {
             q.append(l);
