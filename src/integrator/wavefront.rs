@@ -31,7 +31,7 @@ use crate::queues::{
     ShadowSegments,
 };
 use crate::rng::Sampler;
-use crate::scene::{Hit, RenderScene, StreamScratch};
+use crate::scene::{Hit, InstanceGeometry, RenderScene, StreamScratch};
 
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues, StreamBuffers)>;
@@ -171,6 +171,12 @@ pub fn intersect_closest(
     hits: &mut ClassQueues,
 ) {
     let chunks = rays.len().div_ceil(CHUNK);
+    // Streams pay only where there is a mesh to traverse.
+    let use_streams = rays.depth.first().is_some_and(|&d| d > 0)
+        && scene
+            .instances
+            .iter()
+            .any(|i| matches!(i.geometry, InstanceGeometry::Mesh(_)));
     chunk_buffers(scratch, rays.len())
         .par_iter_mut()
         .enumerate()
@@ -187,7 +193,7 @@ pub fn intersect_closest(
                     local.queues[class as usize].push(HitItem::new(&h, &rays.get(i)));
                 }
             };
-            if rays.depth[c * CHUNK] > 0 {
+            if use_streams {
                 // Secondary rays: the top level in packets of eight, then
                 // every mesh with one stream per direction octant for the
                 // whole chunk (see `crate::stream`): incoherent rays share
