@@ -91,6 +91,9 @@ pub struct Throughput {
     pub camera_single: f64,
     /// Camera rays, packets of neighbouring pixels.
     pub camera_packets: f64,
+    /// Camera rays through the top level in packets and every mesh as
+    /// streams (what the wavefront does when the scene has meshes).
+    pub camera_streams: f64,
     /// Incoherent secondary rays (cosine-distributed from the camera hits), one at a time.
     pub secondary_single: f64,
     /// The same secondary rays in packets of consecutive rays.
@@ -338,6 +341,9 @@ fn throughput(
         camera_packets: best_rate(camera_rays.len(), runs, || {
             std::hint::black_box(trace_packets(scene, &camera_rays, true));
         }),
+        camera_streams: best_rate(camera_rays.len(), runs, || {
+            std::hint::black_box(trace_streams(scene, &camera_rays));
+        }),
         secondary_single: best_rate(secondary.len(), runs, || {
             std::hint::black_box(trace_single(scene, &secondary));
         }),
@@ -401,9 +407,10 @@ fn print_table(r: &SceneResult) {
     );
     let t = r.closest_hit_mrays;
     println!(
-        "  closest-hit Mrays/s: camera rays {:.2} single, {:.2} packets; secondary rays ({}) {:.2} single, {:.2} packets, {:.2} top-level packets, {:.2} streams",
+        "  closest-hit Mrays/s: camera rays {:.2} single, {:.2} packets, {:.2} streams; secondary rays ({}) {:.2} single, {:.2} packets, {:.2} top-level packets, {:.2} streams",
         t.camera_single,
         t.camera_packets,
+        t.camera_streams,
         t.secondary_rays,
         t.secondary_single,
         t.secondary_packets,
