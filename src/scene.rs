@@ -402,7 +402,10 @@ impl RenderScene {
                         }
                     }),
                     InstanceGeometry::Mesh(_) => for_each_lane(lanes, |l| {
-                        let d = inst.transform.to_object.transform_vector3a(p.rays[l].direction);
+                        let d = inst
+                            .transform
+                            .to_object
+                            .transform_vector3a(p.rays[l].direction);
                         let octant = (d.x < 0.0) as u64
                             | ((d.y < 0.0) as u64) << 1
                             | ((d.z < 0.0) as u64) << 2;

@@ -73,16 +73,16 @@ impl Stream {
     pub fn push(&mut self, ray: Ray, t_min: f32, t_max: f32) {
         let mut parallel = 0u32;
         let mut inv = [0.0; 3];
-        for a in 0..3 {
+        for (a, inv) in inv.iter_mut().enumerate() {
             let i = 1.0 / ray.direction[a];
             if i.is_finite() {
-                inv[a] = i;
+                *inv = i;
             } else {
                 parallel |= 1 << a;
             }
         }
         self.origin
-            .push(ray.origin.extend(ray.origin.abs().max_element()).into());
+            .push(ray.origin.extend(ray.origin.abs().max_element()));
         self.inv_dir
             .push(Vec4::new(inv[0], inv[1], inv[2], f32::from_bits(parallel)));
         self.direction_sum += ray.direction;

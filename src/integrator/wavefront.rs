@@ -199,7 +199,11 @@ pub fn intersect_closest(
                 // eight for camera rays as well as for secondary rays,
                 // which share a mesh's upper nodes even where packets of
                 // eight share nothing.
-                let StreamBuffers { rays: r, hits, scratch } = streams;
+                let StreamBuffers {
+                    rays: r,
+                    hits,
+                    scratch,
+                } = streams;
                 r.clear();
                 r.extend((c * CHUNK..end).map(|i| rays.ray(i)));
                 hits.clear();
