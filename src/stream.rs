@@ -7,11 +7,18 @@
 //! rays instead of once per ray. The box test per ray is the same
 //! conservative test as single-ray traversal ([`crate::mesh::NODE_MARGIN_EPS`]),
 //! leaf primitives are tested by the caller's kernel, so a stream finds
-//! the same closest hits as tracing its rays one at a time. Rays of one
-//! stream should share a direction octant: children are visited in one
-//! order for the whole stream (nearest first along the rays' summed
-//! direction), which is near-to-far for every ray of the octant only
-//! approximately, so the caller groups rays by octant.
+//! the same closest hits as tracing its rays one at a time (up to which of
+//! two primitives at exactly the same distance is reported). Children are
+//! visited in one order for the whole stream, nearest first along the
+//! rays' summed direction; [`crate::scene::RenderScene::intersect_stream`]
+//! groups rays by direction octant so that this order is near to far for
+//! each ray too (on `glass_mirror` the grouping measured within noise of
+//! one stream per mesh).
+//!
+//! Against one-ray traversal, which tests each node's eight children in
+//! SIMD registers as well, a stream saves the per-ray traversal bookkeeping
+//! and visits fewer nodes per ray (11.4 against 12.4 for the deepest rays
+//! of `glass_mirror`, leaves first); it gains most on coherent rays.
 //!
 //! This module knows nothing of ECS scheduling; it is a kernel like
 //! [`crate::packet`].
@@ -22,9 +29,9 @@ use obvhs::cwbvh::CwBvh;
 use crate::math::Ray;
 use crate::mesh::NODE_MARGIN_EPS;
 
-/// A stream of rays in structure-of-arrays form, with the buffers its
-/// traversal needs; reused between streams so nothing is allocated per ray
-/// once it has grown.
+/// A stream of rays (per ray: origin, reciprocal direction and search
+/// interval), with the buffers its traversal needs; reused between streams
+/// so nothing is allocated per ray once it has grown.
 #[derive(Clone, Debug, Default)]
 pub struct Stream {
     /// Per ray: origin and its largest coordinate magnitude.
