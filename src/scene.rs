@@ -298,12 +298,25 @@ impl RenderScene {
         self.intersect_packet_with(rays, out, true)
     }
 
-    /// [`RenderScene::intersect_packet`], with the top level traversed as a
-    /// packet and each mesh either as a packet (`mesh_packets`) or one lane
-    /// at a time, for rays too incoherent to share a mesh's nodes.
-    pub fn intersect_packet_with(&self, rays: &[Ray], out: &mut [Option<Hit>], mesh_packets: bool) {
+    /// Closest hits of up to [`LANES`] rays (each searched in `(0, inf)`)
+    /// on the unbounded instances and, by packet traversal of the top
+    /// level, on the shapes, into `best`. The lanes of `p` that reach mesh
+    /// instance `index` go to `mesh(p, lanes, index, instance, mesh, best)`,
+    /// which may record hits in `best` and shrink `p.t_max`.
+    fn top_level_packet(
+        &self,
+        rays: &[Ray],
+        best: &mut [Option<(f32, u32, LocalHit)>],
+        mut mesh: impl FnMut(
+            &mut Packet,
+            LaneMask,
+            u32,
+            &Instance,
+            &Mesh,
+            &mut [Option<(f32, u32, LocalHit)>],
+        ),
+    ) {
         let n = rays.len().min(LANES);
-        let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
         let mut t_max = [f32::INFINITY; LANES];
         for (l, ray) in rays[..n].iter().enumerate() {
             for &i in &self.tlas.unbounded {
@@ -325,29 +338,37 @@ impl RenderScene {
                         best[l] = Some((h.t, index, LocalHit::shape(&h)));
                     }
                 }),
-                InstanceGeometry::Mesh(m) if !mesh_packets => for_each_lane(lanes, |l| {
-                    let local = to_object(inst, &p.rays[l]);
-                    if let Some(h) = m.intersect(&local, p.t_min[l], p.t_max[l]) {
-                        p.t_max[l] = h.t;
-                        best[l] = Some((h.t, index, LocalHit::Mesh(h)));
-                    }
-                }),
-                InstanceGeometry::Mesh(m) => {
-                    let mut local = Packet::new(&[], &[], &[]);
-                    for_each_lane(lanes, |l| {
-                        local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
-                    });
-                    let mut hits = [None; LANES];
-                    m.intersect_packet(&mut local, lanes, &mut hits);
-                    for_each_lane(lanes, |l| {
-                        if let Some(h) = hits[l] {
-                            p.t_max[l] = h.t;
-                            best[l] = Some((h.t, index, LocalHit::Mesh(h)));
-                        }
-                    });
-                }
+                InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
             }
             0
+        });
+    }
+
+    /// [`RenderScene::intersect_packet`], with the top level traversed as a
+    /// packet and each mesh either as a packet (`mesh_packets`) or one lane
+    /// at a time, for rays too incoherent to share a mesh's nodes.
+    pub fn intersect_packet_with(&self, rays: &[Ray], out: &mut [Option<Hit>], mesh_packets: bool) {
+        let n = rays.len().min(LANES);
+        let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
+        self.top_level_packet(rays, &mut best, |p, lanes, index, inst, m, best| {
+            let mut hits = [None; LANES];
+            if mesh_packets {
+                let mut local = Packet::new(&[], &[], &[]);
+                for_each_lane(lanes, |l| {
+                    local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                });
+                m.intersect_packet(&mut local, lanes, &mut hits);
+            } else {
+                for_each_lane(lanes, |l| {
+                    hits[l] = m.intersect(&to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]);
+                });
+            }
+            for_each_lane(lanes, |l| {
+                if let Some(h) = hits[l] {
+                    p.t_max[l] = h.t;
+                    best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                }
+            });
         });
         for (l, o) in out[..n].iter_mut().enumerate() {
             *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
@@ -378,41 +399,19 @@ impl RenderScene {
         best.clear();
         best.resize(n, None);
         deferred.clear();
-        for (p, rays) in rays.chunks(LANES).enumerate() {
+        for (p, packet_rays) in rays.chunks(LANES).enumerate() {
             let first = p * LANES;
-            let mut t_max = [f32::INFINITY; LANES];
-            for (l, ray) in rays.iter().enumerate() {
-                for &i in &self.tlas.unbounded {
-                    if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
-                        t_max[l] = t;
-                        best[first + l] = Some((t, i, h));
-                    }
-                }
-            }
-            let mut packet = Packet::new(rays, &[0.0; LANES][..rays.len()], &t_max[..rays.len()]);
-            packet::traverse(&self.tlas.cw, &mut packet, ALL_LANES, |p, lanes, slot| {
-                let index = self.tlas.leaf_instances[slot];
-                let inst = &self.instances[index as usize];
-                match &inst.geometry {
-                    InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
-                        let local = to_object(inst, &p.rays[l]);
-                        if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
-                            p.t_max[l] = h.t;
-                            best[first + l] = Some((h.t, index, LocalHit::shape(&h)));
-                        }
-                    }),
-                    InstanceGeometry::Mesh(_) => for_each_lane(lanes, |l| {
-                        let d = inst
-                            .transform
-                            .to_object
-                            .transform_vector3a(p.rays[l].direction);
-                        let octant = (d.x < 0.0) as u64
-                            | ((d.y < 0.0) as u64) << 1
-                            | ((d.z < 0.0) as u64) << 2;
-                        deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
-                    }),
-                }
-                0
+            let best = &mut best[first..first + packet_rays.len()];
+            self.top_level_packet(packet_rays, best, |p, lanes, index, inst, _, _| {
+                for_each_lane(lanes, |l| {
+                    let d = inst
+                        .transform
+                        .to_object
+                        .transform_vector3a(p.rays[l].direction);
+                    let octant =
+                        (d.x < 0.0) as u64 | ((d.y < 0.0) as u64) << 1 | ((d.z < 0.0) as u64) << 2;
+                    deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
+                })
             });
         }
         // One stream per (instance, octant), in a fixed order.
