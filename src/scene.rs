@@ -18,6 +18,9 @@ use crate::shapes::Shape;
 use crate::tlas::{Tlas, TlasCounters, TlasPolicy, TlasUpdate};
 use crate::transform::{InstanceTransform, Transform};
 
+/// Bits of a deferred stream key that hold the ray's index.
+const RAY_BITS: u64 = 0xffff_ffff;
+
 /// Buffers of [`RenderScene::intersect_stream`], kept between calls so
 /// that tracing allocates nothing once they have grown.
 #[derive(Debug, Default)]
@@ -28,6 +31,18 @@ pub struct StreamScratch {
     stream: crate::stream::Stream,
     wt: Vec<crate::mesh::WatertightRay>,
     mesh_hits: Vec<Option<crate::mesh::MeshHit>>,
+}
+
+impl StreamScratch {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.best.capacity() * size_of::<Option<(f32, u32, LocalHit)>>()
+            + self.deferred.capacity() * size_of::<u64>()
+            + self.stream.bytes()
+            + self.wt.capacity() * size_of::<crate::mesh::WatertightRay>()
+            + self.mesh_hits.capacity() * size_of::<Option<crate::mesh::MeshHit>>()
+    }
 }
 
 /// The geometry of one instance.
@@ -389,6 +404,10 @@ impl RenderScene {
         scratch: &mut StreamScratch,
     ) {
         let n = rays.len();
+        debug_assert!(
+            n <= RAY_BITS as usize,
+            "ray indices are 32-bit in stream keys"
+        );
         let StreamScratch {
             best,
             deferred,
@@ -426,14 +445,14 @@ impl RenderScene {
             };
             stream.clear();
             for &k in &rest[..group] {
-                let i = (k & 0xffff_ffff) as usize;
+                let i = (k & RAY_BITS) as usize;
                 let t_max = best[i].as_ref().map_or(f32::INFINITY, |b| b.0);
                 stream.push(to_object(inst, &rays[i]), 0.0, t_max);
             }
             mesh.intersect_stream(stream, wt, mesh_hits);
             for (&k, h) in rest[..group].iter().zip(mesh_hits.iter()) {
                 if let Some(h) = h {
-                    best[(k & 0xffff_ffff) as usize] = Some((h.t, index, LocalHit::Mesh(*h)));
+                    best[(k & RAY_BITS) as usize] = Some((h.t, index, LocalHit::Mesh(*h)));
                 }
             }
             rest = &rest[group..];

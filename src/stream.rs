@@ -66,6 +66,16 @@ impl Stream {
         self.direction_sum = Vec3A::ZERO;
     }
 
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        (self.origin.capacity() + self.inv_dir.capacity()) * size_of::<Vec4>()
+            + self.rays.capacity() * size_of::<Ray>()
+            + (self.t_min.capacity() + self.t_max.capacity()) * size_of::<f32>()
+            + (self.ids.capacity() + 3 * self.stack.capacity()) * size_of::<u32>()
+            + self.masks.capacity()
+    }
+
     /// Number of rays.
     pub fn len(&self) -> usize {
         self.rays.len()

@@ -364,7 +364,7 @@ pub fn advance_bounce(
         + scratch
             .routing
             .iter()
-            .map(|(e, h, _)| e.bytes() + h.bytes())
+            .map(|(e, h, s)| e.bytes() + h.bytes() + s.bytes())
             .sum::<usize>()
         + scratch.shadows.bytes()
         + scratch.shading.iter().map(|s| s.bytes()).sum::<usize>()

@@ -36,6 +36,9 @@ use crate::scene::{Hit, InstanceGeometry, RenderScene, StreamScratch};
 /// Per-chunk routing buffers of [`intersect_closest`], kept between calls.
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues, StreamBuffers)>;
 
+use crate::shading::{Interaction, RayKind, ShadowQuery, direct_light, scatter};
+use crate::stats::{RayCounts, RenderCounters};
+
 /// One chunk's buffers for tracing its rays as streams.
 #[derive(Debug, Default)]
 pub struct StreamBuffers {
@@ -43,8 +46,15 @@ pub struct StreamBuffers {
     hits: Vec<Option<Hit>>,
     scratch: StreamScratch,
 }
-use crate::shading::{Interaction, RayKind, ShadowQuery, direct_light, scatter};
-use crate::stats::{RayCounts, RenderCounters};
+
+impl StreamBuffers {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.rays.capacity() * std::mem::size_of::<Ray>()
+            + self.hits.capacity() * std::mem::size_of::<Option<Hit>>()
+            + self.scratch.bytes()
+    }
+}
 
 /// Items per parallel work chunk: large enough to amortise scheduling,
 /// small enough to balance two to a few dozen threads.
