@@ -20,6 +20,41 @@ fn vec_bytes<T>(v: &Vec<T>) -> usize {
     v.capacity() * std::mem::size_of::<T>()
 }
 
+/// The field-by-field methods every structure-of-arrays queue has: length
+/// (of the field `$len`), `clear`, `append` and [`QueueBytes`], over the
+/// listed fields, which must be all of the queue's `Vec`s.
+macro_rules! soa_queue {
+    ($queue:ident, $what:literal, $len:ident, [$($field:ident),+ $(,)?]) => {
+        impl $queue {
+            #[doc = concat!("Number of ", $what, ".")]
+            pub fn len(&self) -> usize {
+                self.$len.len()
+            }
+
+            #[doc = concat!("True when no ", $what, " are queued.")]
+            pub fn is_empty(&self) -> bool {
+                self.$len.is_empty()
+            }
+
+            #[doc = concat!("Removes all ", $what, ", keeping the allocation.")]
+            pub fn clear(&mut self) {
+                $(self.$field.clear();)+
+            }
+
+            #[doc = concat!("Appends all ", $what, " of `other`, in order.")]
+            pub fn append(&mut self, other: &$queue) {
+                $(self.$field.extend_from_slice(&other.$field);)+
+            }
+        }
+
+        impl QueueBytes for $queue {
+            fn bytes(&self) -> usize {
+                0 $(+ vec_bytes(&self.$field))+
+            }
+        }
+    };
+}
+
 /// A ray waiting to be traced, with the path it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RayItem {
@@ -54,26 +89,6 @@ pub struct RayQueue {
 }
 
 impl RayQueue {
-    /// Number of rays.
-    pub fn len(&self) -> usize {
-        self.path.len()
-    }
-
-    /// True when no ray is queued.
-    pub fn is_empty(&self) -> bool {
-        self.path.is_empty()
-    }
-
-    /// Removes every ray, keeping the allocation.
-    pub fn clear(&mut self) {
-        self.origin.clear();
-        self.direction.clear();
-        self.throughput.clear();
-        self.path.clear();
-        self.depth.clear();
-        self.pdf.clear();
-    }
-
     /// Appends a ray.
     #[inline]
     pub fn push(&mut self, item: RayItem) {
@@ -91,16 +106,6 @@ impl RayQueue {
         self.path.push(item.path);
         self.depth.push(item.depth);
         self.pdf.push(item.pdf);
-    }
-
-    /// Appends every ray of `other`, in order.
-    pub fn append(&mut self, other: &RayQueue) {
-        self.origin.extend_from_slice(&other.origin);
-        self.direction.extend_from_slice(&other.direction);
-        self.throughput.extend_from_slice(&other.throughput);
-        self.path.extend_from_slice(&other.path);
-        self.depth.extend_from_slice(&other.depth);
-        self.pdf.extend_from_slice(&other.pdf);
     }
 
     /// The ray at `i`.
@@ -122,16 +127,12 @@ impl RayQueue {
     }
 }
 
-impl QueueBytes for RayQueue {
-    fn bytes(&self) -> usize {
-        vec_bytes(&self.origin)
-            + vec_bytes(&self.direction)
-            + vec_bytes(&self.throughput)
-            + vec_bytes(&self.path)
-            + vec_bytes(&self.depth)
-            + vec_bytes(&self.pdf)
-    }
-}
+soa_queue!(
+    RayQueue,
+    "rays",
+    path,
+    [origin, direction, throughput, path, depth, pdf]
+);
 
 /// A surface hit waiting to be shaded.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -228,32 +229,6 @@ pub struct HitQueue {
 }
 
 impl HitQueue {
-    /// Number of hits.
-    pub fn len(&self) -> usize {
-        self.path.len()
-    }
-
-    /// True when empty.
-    pub fn is_empty(&self) -> bool {
-        self.path.is_empty()
-    }
-
-    /// Removes every hit, keeping the allocation.
-    pub fn clear(&mut self) {
-        self.direction.clear();
-        self.point.clear();
-        self.geometric_normal.clear();
-        self.shading_normal.clear();
-        self.uv.clear();
-        self.material.clear();
-        self.throughput.clear();
-        self.path.clear();
-        self.depth.clear();
-        self.instance.clear();
-        self.distance.clear();
-        self.pdf.clear();
-    }
-
     /// Appends a hit.
     #[inline]
     pub fn push(&mut self, item: HitItem) {
@@ -273,23 +248,6 @@ impl HitQueue {
         self.instance.push(item.instance);
         self.distance.push(item.distance);
         self.pdf.push(item.pdf);
-    }
-
-    /// Appends every hit of `other`, in order.
-    pub fn append(&mut self, other: &HitQueue) {
-        self.direction.extend_from_slice(&other.direction);
-        self.point.extend_from_slice(&other.point);
-        self.geometric_normal
-            .extend_from_slice(&other.geometric_normal);
-        self.shading_normal.extend_from_slice(&other.shading_normal);
-        self.uv.extend_from_slice(&other.uv);
-        self.material.extend_from_slice(&other.material);
-        self.throughput.extend_from_slice(&other.throughput);
-        self.path.extend_from_slice(&other.path);
-        self.depth.extend_from_slice(&other.depth);
-        self.instance.extend_from_slice(&other.instance);
-        self.distance.extend_from_slice(&other.distance);
-        self.pdf.extend_from_slice(&other.pdf);
     }
 
     /// The hit at `i`.
@@ -312,22 +270,25 @@ impl HitQueue {
     }
 }
 
-impl QueueBytes for HitQueue {
-    fn bytes(&self) -> usize {
-        vec_bytes(&self.direction)
-            + vec_bytes(&self.point)
-            + vec_bytes(&self.geometric_normal)
-            + vec_bytes(&self.shading_normal)
-            + vec_bytes(&self.uv)
-            + vec_bytes(&self.material)
-            + vec_bytes(&self.throughput)
-            + vec_bytes(&self.path)
-            + vec_bytes(&self.depth)
-            + vec_bytes(&self.instance)
-            + vec_bytes(&self.distance)
-            + vec_bytes(&self.pdf)
-    }
-}
+soa_queue!(
+    HitQueue,
+    "hits",
+    path,
+    [
+        direction,
+        point,
+        geometric_normal,
+        shading_normal,
+        uv,
+        material,
+        throughput,
+        path,
+        instance,
+        distance,
+        pdf,
+        depth
+    ]
+);
 
 /// Rays that left the scene: they bring back the background.
 #[derive(Clone, Debug, Default)]
@@ -339,22 +300,6 @@ pub struct EscapedQueue {
 }
 
 impl EscapedQueue {
-    /// Number of escaped rays.
-    pub fn len(&self) -> usize {
-        self.path.len()
-    }
-
-    /// True when empty.
-    pub fn is_empty(&self) -> bool {
-        self.path.is_empty()
-    }
-
-    /// Removes everything.
-    pub fn clear(&mut self) {
-        self.throughput.clear();
-        self.path.clear();
-    }
-
     /// Appends an escaped ray.
     #[inline]
     pub fn push(&mut self, path: u32, throughput: Color) {
@@ -362,19 +307,9 @@ impl EscapedQueue {
         self.throughput.push(throughput);
         self.path.push(path);
     }
-
-    /// Appends every ray of `other`, in order.
-    pub fn append(&mut self, other: &EscapedQueue) {
-        self.throughput.extend_from_slice(&other.throughput);
-        self.path.extend_from_slice(&other.path);
-    }
 }
 
-impl QueueBytes for EscapedQueue {
-    fn bytes(&self) -> usize {
-        vec_bytes(&self.throughput) + vec_bytes(&self.path)
-    }
-}
+soa_queue!(EscapedQueue, "escaped rays", path, [throughput, path]);
 
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -405,25 +340,6 @@ pub struct ShadowQueue {
 }
 
 impl ShadowQueue {
-    /// Number of shadow rays.
-    pub fn len(&self) -> usize {
-        self.path.len()
-    }
-
-    /// True when empty.
-    pub fn is_empty(&self) -> bool {
-        self.path.is_empty()
-    }
-
-    /// Removes everything.
-    pub fn clear(&mut self) {
-        self.origin.clear();
-        self.direction.clear();
-        self.t_max.clear();
-        self.radiance.clear();
-        self.path.clear();
-    }
-
     /// Appends a shadow ray.
     #[inline]
     pub fn push(&mut self, item: ShadowItem) {
@@ -444,26 +360,14 @@ impl ShadowQueue {
     pub fn ray(&self, i: usize) -> Ray {
         Ray::new(self.origin[i], self.direction[i])
     }
-
-    /// Appends every shadow ray of `other`, in order.
-    pub fn append(&mut self, other: &ShadowQueue) {
-        self.origin.extend_from_slice(&other.origin);
-        self.direction.extend_from_slice(&other.direction);
-        self.t_max.extend_from_slice(&other.t_max);
-        self.radiance.extend_from_slice(&other.radiance);
-        self.path.extend_from_slice(&other.path);
-    }
 }
 
-impl QueueBytes for ShadowQueue {
-    fn bytes(&self) -> usize {
-        vec_bytes(&self.origin)
-            + vec_bytes(&self.direction)
-            + vec_bytes(&self.t_max)
-            + vec_bytes(&self.radiance)
-            + vec_bytes(&self.path)
-    }
-}
+soa_queue!(
+    ShadowQueue,
+    "shadow rays",
+    path,
+    [origin, direction, t_max, radiance, path]
+);
 
 /// Shadow rays kept as the per-chunk segments that produced them, in
 /// chunk order: a shading chunk hands its whole buffer over
