@@ -92,7 +92,8 @@ pub struct IntegratorResult {
 pub struct Throughput {
     /// Camera rays, one at a time.
     pub camera_single: f64,
-    /// Camera rays, packets of neighbouring pixels.
+    /// Camera rays, packets of neighbouring pixels (what the wavefront
+    /// does when the scene has no mesh).
     pub camera_packets: f64,
     /// Camera rays through the top level in packets and every mesh as
     /// streams (what the wavefront does when the scene has meshes).
@@ -102,11 +103,11 @@ pub struct Throughput {
     /// The same secondary rays in packets of consecutive rays.
     pub secondary_packets: f64,
     /// The same packets through the top level, meshes one lane at a time
-    /// (what the wavefront does with secondary rays).
+    /// (what the wavefront does with shadow rays).
     pub secondary_top_level_packets: f64,
     /// The same secondary rays through the top level in packets and every
     /// mesh as streams of 1024 rays split by direction octant (what the
-    /// wavefront does with secondary rays).
+    /// wavefront does with closest-hit rays when the scene has a mesh).
     pub secondary_streams: f64,
     /// Number of secondary rays.
     pub secondary_rays: usize,
