@@ -27,7 +27,7 @@ pub struct BenchArgs {
     /// Scene files to measure.
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
-    /// Renders per integrator and scene (alternating); the median is reported.
+    /// Renders per integrator and scene (alternating); the median and the fastest are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
     /// Worker threads [default: one per core].
