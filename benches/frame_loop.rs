@@ -15,7 +15,7 @@
 //! * `tlas_update/...`: the top level of 1,000 instances after moving a
 //!   fraction of them, updated leaf by leaf (`reinsert`, `refit`) or
 //!   rebuilt (`rebuild`): the measurement behind
-//!   `prism::tlas::DEFAULT_REBUILD_FRACTION`.
+//!   `prism::accel::tlas::DEFAULT_REBUILD_FRACTION`.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -23,15 +23,15 @@ use std::time::Duration;
 use bevy_ecs::prelude::*;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use glam::Vec3;
-use prism::integrator::{IntegratorKind, RenderSettings};
-use prism::material::Material;
-use prism::mesh::BuildQuality;
+use prism::accel::tlas::{MoveStrategy, TlasPolicy, TlasUpdate};
+use prism::geometry::mesh::BuildQuality;
+use prism::geometry::shapes::Shape;
+use prism::geometry::transform::Transform;
+use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::scene::material::Material;
 use prism::scene::{Instance, InstanceGeometry, RenderScene};
-use prism::shapes::Shape;
 use prism::systems::demo::{AnimationTime, DemoScene, add_animation};
 use prism::systems::{Frame, PrismPlugin, RenderConfig, run_frame};
-use prism::tlas::{MoveStrategy, TlasPolicy, TlasUpdate};
-use prism::transform::Transform;
 
 fn frame_loop(c: &mut Criterion) {
     let mut group = c.benchmark_group("frame_loop");

@@ -12,8 +12,8 @@ use std::path::Path;
 
 use bevy_ecs::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use prism::integrator::{IntegratorKind, RenderSettings};
-use prism::mesh::BuildQuality;
+use prism::geometry::mesh::BuildQuality;
+use prism::integrators::{IntegratorKind, RenderSettings};
 use prism::systems::{self, Frame, RenderConfig};
 
 const W: u32 = 320;
@@ -23,7 +23,7 @@ fn prepare(name: &str) -> (World, Schedule) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("assets")
         .join(name);
-    let desc = prism::loader::load(&path, BuildQuality::Medium).expect("load scene");
+    let desc = prism::io::load(&path, BuildQuality::Medium).expect("load scene");
     let mut world = World::new();
     let schedule = systems::setup(&mut world);
     let max_depth = desc.settings.max_depth.unwrap_or(8);
@@ -72,7 +72,7 @@ fn bench_scenes(c: &mut Criterion) {
 /// gated by the scene's features, against the same schedule forced to run
 /// every stage (the extra stages find empty queues).
 fn bench_stage_gating(c: &mut Criterion) {
-    use prism::integrator::Transport;
+    use prism::integrators::Transport;
     use prism::systems::wavefront::StageGating;
     for transport in [Transport::Whitted, Transport::Path] {
         let mut group = c.benchmark_group(format!("stage_gating/{}", transport.name()));

@@ -18,9 +18,9 @@ use bevy_ecs::prelude::*;
 use clap::Parser;
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame as GifFrame, RgbaImage};
-use prism::integrator::{IntegratorKind, RenderSettings};
-use prism::mesh::BuildQuality;
-use prism::output::{PngOptions, to_srgb8};
+use prism::geometry::mesh::BuildQuality;
+use prism::image::output::{PngOptions, to_srgb8};
+use prism::integrators::{IntegratorKind, RenderSettings};
 use prism::systems::demo::{AnimationTime, DemoScene, add_animation};
 use prism::systems::{Frame, PrismPlugin, RenderConfig, run_frame};
 
@@ -84,7 +84,7 @@ fn run(args: Args) -> Result<(), String> {
         .gltf
         .clone()
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/gltf/showroom.gltf"));
-    let gltf = prism::loader::load(&gltf_path, BuildQuality::Medium)
+    let gltf = prism::io::load(&gltf_path, BuildQuality::Medium)
         .map_err(|e| format!("{}: {e}", gltf_path.display()))?;
 
     let mut world = World::new();
@@ -154,7 +154,7 @@ fn run(args: Args) -> Result<(), String> {
         }
         if !args.no_png {
             let path = args.out.join(format!("frame_{f:04}.png"));
-            prism::output::write_image(&path, film, &png).map_err(|e| e.to_string())?;
+            prism::image::output::write_image(&path, film, &png).map_err(|e| e.to_string())?;
         }
         let mut rgba = RgbaImage::new(film.width, film.height);
         for (px, c) in rgba.pixels_mut().zip(&film.pixels) {

@@ -22,39 +22,19 @@
 // reject NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod camera;
-pub mod desc;
-pub mod emitters;
-pub mod error;
-pub mod features;
-pub mod film;
-pub mod integrator;
-pub mod light;
-pub mod loader;
-pub mod material;
-pub mod math;
-pub mod mesh;
-pub mod metrics;
-pub mod optics;
-pub mod output;
-pub mod packet;
-pub mod path;
-pub mod procedural;
-pub mod progressive;
-pub mod queues;
-pub mod rng;
+pub mod accel;
+pub mod core;
+pub mod geometry;
+pub mod image;
+pub mod integrators;
+pub mod io;
 pub mod scene;
-pub mod shading;
-pub mod shapes;
-pub mod stats;
-pub mod stream;
-pub mod tlas;
-pub mod transform;
+pub mod transport;
 
 #[path = "../systems/mod.rs"]
 pub mod systems;
 
-pub use error::{Error, Result};
+pub use crate::core::error::{Error, Result};
 
 /// The README's code examples, compiled as doctests.
 #[doc = include_str!("../README.md")]

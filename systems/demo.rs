@@ -15,14 +15,14 @@ use bevy_ecs::prelude::*;
 use glam::{Affine3A, Quat, Vec3};
 
 use super::{MeshInstance, PrismSystems};
-use crate::camera::Camera;
-use crate::desc::{Geometry, SceneDesc};
-use crate::light::Light;
-use crate::material::Material;
-use crate::math::Color;
-use crate::mesh::{BuildQuality, Mesh, NormalMode};
-use crate::shapes::Shape;
-use crate::transform::Transform;
+use crate::core::math::Color;
+use crate::geometry::mesh::{BuildQuality, Mesh, NormalMode};
+use crate::geometry::shapes::Shape;
+use crate::geometry::transform::Transform;
+use crate::io::desc::{Geometry, SceneDesc};
+use crate::scene::camera::Camera;
+use crate::scene::light::Light;
+use crate::scene::material::Material;
 
 /// Animation clock, in seconds of scene time.
 #[derive(Resource, Clone, Copy, Debug, Default)]
@@ -115,7 +115,7 @@ impl Default for DemoScene {
 fn knot(p: u32, q: u32, triangles: u32) -> Arc<Mesh> {
     let sides = 16;
     let segments = (triangles / (2 * sides)).max(8);
-    let data = crate::procedural::torus_knot(p, q, 1.0, 0.28, segments, sides);
+    let data = crate::geometry::procedural::torus_knot(p, q, 1.0, 0.28, segments, sides);
     Arc::new(
         Mesh::new("torus knot", data, NormalMode::Smooth, BuildQuality::Medium)
             .expect("procedural knots are valid"),
@@ -220,7 +220,7 @@ impl DemoScene {
         // A loaded scene's mesh objects, scaled to about 2.5 units and
         // turning; flat ones (floors) are left out.
         if let Some(desc) = self.gltf {
-            let bounds = |o: &crate::desc::ObjectDesc| {
+            let bounds = |o: &crate::io::desc::ObjectDesc| {
                 let Geometry::Mesh(m) = &o.geometry else {
                     return None;
                 };

@@ -2,9 +2,9 @@
 //! a `bevy_ecs` world into an image by calling the kernels.
 //!
 //! A scene is a world of entities carrying the components
-//! [`Transform`](crate::transform::Transform), [`Shape`](crate::shapes::Shape)
+//! [`Transform`](crate::geometry::transform::Transform), [`Shape`](crate::geometry::shapes::Shape)
 //! or [`MeshInstance`],
-//! [`Material`](crate::material::Material), [`Light`](crate::light::Light)
+//! [`Material`](crate::scene::material::Material), [`Light`](crate::scene::light::Light)
 //! and [`Camera`]. Each frame runs three stages, declared once in
 //! [`add_render_systems`]:
 //!
@@ -35,16 +35,16 @@ use std::time::Instant;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 
-use crate::camera::Camera;
-use crate::desc::{Geometry, SceneDesc};
-use crate::film::Film;
-use crate::integrator::wavefront::WavefrontReport;
-use crate::integrator::{self, IntegratorKind, RenderSettings};
-use crate::math::Color;
-use crate::mesh::{BuildQuality, MeshInstance};
-use crate::progressive::Accumulator;
+use crate::core::math::Color;
+use crate::geometry::mesh::{BuildQuality, MeshInstance};
+use crate::image::film::Film;
+use crate::integrators::counters::RenderCounters;
+use crate::integrators::progressive::Accumulator;
+use crate::integrators::wavefront::WavefrontReport;
+use crate::integrators::{self, IntegratorKind, RenderSettings};
+use crate::io::desc::{Geometry, SceneDesc};
 use crate::scene::RenderScene;
-use crate::stats::RenderCounters;
+use crate::scene::camera::Camera;
 use sync::SceneUpdateReport;
 
 /// The stages of a frame, run in this order.
@@ -117,7 +117,7 @@ pub struct SceneAccel {
 /// Progressive accumulation: while nothing changes (scene, camera,
 /// settings), each frame adds `spp` samples per pixel to the previous
 /// ones, and frame `k` is bit for bit the image of `k * spp` samples (see
-/// [`crate::progressive`]). Any change starts again from `spp` samples.
+/// [`crate::integrators::progressive`]). Any change starts again from `spp` samples.
 /// Applies to the recursive integrator (Whitted or path transport); the
 /// wavefront renders each frame independently.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -214,10 +214,10 @@ pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
 /// wavefront's schedules, and the three stages (after which the finished
 /// image is in the [`Frame`] resource).
 ///
-/// Entities the game spawns with [`Transform`](crate::transform::Transform)
-/// and a [`Shape`](crate::shapes::Shape) or [`MeshInstance`] (optionally
-/// a [`Material`](crate::material::Material)), lights
-/// ([`Light`](crate::light::Light), placed by their transform) and a
+/// Entities the game spawns with [`Transform`](crate::geometry::transform::Transform)
+/// and a [`Shape`](crate::geometry::shapes::Shape) or [`MeshInstance`] (optionally
+/// a [`Material`](crate::scene::material::Material)), lights
+/// ([`Light`](crate::scene::light::Light), placed by their transform) and a
 /// [`Camera`] are rendered; each frame only what changed is updated.
 /// Order your game systems `.before(PrismSystems::Extract)` so a frame
 /// shows this tick's state, and call [`World::clear_trackers`] after each
@@ -226,13 +226,13 @@ pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
 /// ```
 /// use bevy_ecs::prelude::*;
 /// use glam::Vec3;
-/// use prism::camera::Camera;
-/// use prism::integrator::RenderSettings;
-/// use prism::light::Light;
-/// use prism::material::Material;
-/// use prism::shapes::Shape;
+/// use prism::scene::camera::Camera;
+/// use prism::integrators::RenderSettings;
+/// use prism::scene::light::Light;
+/// use prism::scene::material::Material;
+/// use prism::geometry::shapes::Shape;
 /// use prism::systems::{Frame, PrismPlugin, PrismSystems, run_frame};
-/// use prism::transform::Transform;
+/// use prism::geometry::transform::Transform;
 ///
 /// #[derive(Component)]
 /// struct Spin;
@@ -403,9 +403,9 @@ pub fn render_recursive(world: &mut World) {
     let progress = config
         .progress
         .as_deref()
-        .map(|p| p as integrator::Progress<'_>);
+        .map(|p| p as integrators::Progress<'_>);
     let (film, counters) =
-        integrator::recursive::render(&scene, &camera, &config.settings, progress);
+        integrators::recursive::render(&scene, &camera, &config.settings, progress);
     let mut frame = world.resource_mut::<Frame>();
     frame.render_seconds = start.elapsed().as_secs_f64();
     frame.film = Some(film);

@@ -14,7 +14,7 @@
 //!
 //! then [`commit_scene`] (in [`PrismSystems::Accelerate`](super::PrismSystems::Accelerate)) commits the
 //! top level: leaf updates and a conversion, or a full rebuild above the
-//! churn threshold (see [`crate::tlas::TlasPolicy`]).
+//! churn threshold (see [`crate::accel::tlas::TlasPolicy`]).
 //!
 //! An *object* is an entity with a [`Transform`] and a [`Shape`] or a
 //! [`MeshInstance`] (the mesh wins when it has both), and optionally a
@@ -25,7 +25,7 @@
 //! for two calls of [`World::clear_trackers`]: call it once per frame, as
 //! [`super::run_frame`] does.
 //!
-//! [`Mesh`]: crate::mesh::Mesh
+//! [`Mesh`]: crate::geometry::mesh::Mesh
 
 use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
@@ -34,13 +34,13 @@ use std::time::Instant;
 use bevy_ecs::prelude::*;
 
 use super::{ExtractedScene, Frame, RenderConfig, SceneAccel};
-use crate::light::{Light, WorldLight};
-use crate::material::Material;
-use crate::mesh::{BuildQuality, MeshInstance};
+use crate::accel::tlas::{TlasCounters, TlasUpdate};
+use crate::geometry::mesh::{BuildQuality, MeshInstance};
+use crate::geometry::shapes::Shape;
+use crate::geometry::transform::Transform;
+use crate::scene::light::{Light, WorldLight};
+use crate::scene::material::Material;
 use crate::scene::{Instance, InstanceGeometry, RenderScene};
-use crate::shapes::Shape;
-use crate::tlas::{TlasCounters, TlasUpdate};
-use crate::transform::Transform;
 
 /// What the last frame's scene update did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -65,7 +65,7 @@ pub struct SceneUpdateReport {
     /// Cumulative top-level work since the scene was created.
     pub tlas_counters: TlasCounters,
     /// Mesh BVHs built by the process so far
-    /// ([`crate::mesh::mesh_bvh_builds`]); scene updates never add to it.
+    /// ([`crate::geometry::mesh::mesh_bvh_builds`]); scene updates never add to it.
     pub mesh_bvh_builds: u64,
     /// Seconds spent applying ECS changes to the scene.
     pub sync_seconds: f64,
@@ -416,7 +416,7 @@ pub fn commit_scene(
     let report = &mut sync.report;
     report.tlas = update;
     report.tlas_counters = counters;
-    report.mesh_bvh_builds = crate::mesh::mesh_bvh_builds();
+    report.mesh_bvh_builds = crate::geometry::mesh::mesh_bvh_builds();
     report.sync_seconds = sync_seconds;
     report.accel_seconds = accel_seconds;
     frame.update = *report;
@@ -427,7 +427,7 @@ pub fn commit_scene(
 pub fn extract_camera(
     config: Res<RenderConfig>,
     sync: Res<SceneSync>,
-    cameras: Query<(Entity, &crate::camera::Camera)>,
+    cameras: Query<(Entity, &crate::scene::camera::Camera)>,
     mut out: ResMut<ExtractedScene>,
 ) {
     out.error = sync
@@ -447,7 +447,7 @@ pub fn extract_camera(
 /// transform. Used to check incremental updates.
 pub fn scene_from_scratch(
     world: &mut World,
-    background: crate::math::Color,
+    background: crate::core::math::Color,
     quality: BuildQuality,
 ) -> Result<(RenderScene, Vec<Entity>), String> {
     let mut q = world.query_filtered::<ObjectData, ObjectFilter>();

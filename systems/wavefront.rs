@@ -19,16 +19,16 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 
 use super::{Frame, RenderConfig, frame_preconditions};
-use crate::camera::CameraRays;
-use crate::features::SceneFeatures;
-use crate::integrator::wavefront::{
+use crate::core::math::Color;
+use crate::integrators::wavefront::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowSegments};
+use crate::integrators::wavefront::{
     self as kernels, ClassQueues, PixelSums, RoutingScratch, ShadeScratch, ShadowScratch,
     StageSeconds, WavefrontReport,
 };
-use crate::material::MaterialClass;
-use crate::math::Color;
-use crate::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowSegments};
 use crate::scene::RenderScene;
+use crate::scene::camera::CameraRays;
+use crate::scene::features::SceneFeatures;
+use crate::scene::material::MaterialClass;
 
 /// Schedule run once at the start of each batch.
 #[derive(ScheduleLabel, Debug, Clone, PartialEq, Eq, Hash)]

@@ -6,13 +6,13 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::{Quat, Vec3, Vec3A};
-use prism::material::Material;
-use prism::math::Ray;
-use prism::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
-use prism::rng::Sampler;
+use prism::core::math::Ray;
+use prism::core::rng::Sampler;
+use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
+use prism::geometry::shapes::Shape;
+use prism::geometry::transform::Transform;
+use prism::scene::material::Material;
 use prism::scene::{Instance, InstanceGeometry, RenderScene};
-use prism::shapes::Shape;
-use prism::transform::Transform;
 
 struct Rng(Sampler);
 
@@ -293,7 +293,7 @@ fn empty_and_degenerate_scenes() {
 /// traversed as packets or one lane at a time.
 #[test]
 fn packets_equal_single_rays() {
-    use prism::packet::LANES;
+    use prism::accel::packet::LANES;
     let mut rng = Rng::new(99);
     let scene = random_scene(&mut rng, true);
     let mut checked = 0;
@@ -372,7 +372,10 @@ fn streams_equal_single_rays() {
             let n = h.geometric_normal.normalize();
             let d: Vec3A = rng.dir().into();
             let side = if d.dot(n) > 0.0 { n } else { -n };
-            rays.push(Ray::new(prism::optics::offset_origin(h.point, side), d));
+            rays.push(Ray::new(
+                prism::core::optics::offset_origin(h.point, side),
+                d,
+            ));
         }
     }
     let mut scratch = StreamScratch::default();

@@ -6,11 +6,11 @@
 //! triangle BVH builds is this file's own.
 
 use bevy_ecs::prelude::*;
-use prism::integrator::wavefront::StageRuns;
-use prism::integrator::{IntegratorKind, RenderSettings, Transport};
-use prism::material::MaterialClass;
-use prism::mesh::BuildQuality;
-use prism::queues::QueueBytes;
+use prism::geometry::mesh::BuildQuality;
+use prism::integrators::wavefront::StageRuns;
+use prism::integrators::wavefront::queues::QueueBytes;
+use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{HitQueues, ShadowRays, StageGating, StageScratch};
 use prism::systems::{self, Frame, RenderConfig};
 
@@ -41,7 +41,7 @@ fn wavefront_world(toml: &str, transport: Transport, force_all: bool) -> World {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, toml).unwrap();
-    let desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+    let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
     let mut world = World::new();
     let mut schedule = systems::setup(&mut world);
     let cameras = systems::spawn_scene(&mut world, desc);
@@ -154,7 +154,7 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
 
 #[test]
 fn a_sphere_only_scene_builds_no_triangle_bvh() {
-    let before = prism::mesh::mesh_bvh_builds();
+    let before = prism::geometry::mesh::mesh_bvh_builds();
     for transport in [Transport::Whitted, Transport::Path] {
         let world = wavefront_world(DIFFUSE_ONLY, transport, false);
         let scene = world
@@ -162,22 +162,22 @@ fn a_sphere_only_scene_builds_no_triangle_bvh() {
             .scene
             .clone()
             .unwrap();
-        let features = prism::features::SceneFeatures::of(&scene);
+        let features = prism::scene::features::SceneFeatures::of(&scene);
         assert_eq!(features.mesh_instances, 0, "{transport:?}");
         assert_eq!(features.shapes, ["disk", "sphere"]);
     }
-    assert_eq!(prism::mesh::mesh_bvh_builds(), before);
+    assert_eq!(prism::geometry::mesh::mesh_bvh_builds(), before);
     // The counter does count: a one-triangle mesh builds one.
-    let _ = prism::mesh::Mesh::new(
+    let _ = prism::geometry::mesh::Mesh::new(
         "triangle",
-        prism::mesh::MeshData {
+        prism::geometry::mesh::MeshData {
             positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
             indices: vec![[0, 1, 2]],
             ..Default::default()
         },
-        prism::mesh::NormalMode::Flat,
+        prism::geometry::mesh::NormalMode::Flat,
         BuildQuality::Fastest,
     )
     .unwrap();
-    assert_eq!(prism::mesh::mesh_bvh_builds(), before + 1);
+    assert_eq!(prism::geometry::mesh::mesh_bvh_builds(), before + 1);
 }

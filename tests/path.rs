@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3, Vec3A};
-use prism::camera::{Camera, CameraRays};
-use prism::film::Film;
-use prism::integrator::{IntegratorKind, RenderSettings, Transport};
-use prism::mesh::BuildQuality;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::scene::camera::{Camera, CameraRays};
 use prism::systems::{self, RenderConfig};
 
 fn assets() -> PathBuf {
@@ -25,7 +25,7 @@ fn render_text(toml: &str, settings: &RenderSettings, kind: IntegratorKind) -> F
 }
 
 fn render_file(path: &Path, settings: &RenderSettings, kind: IntegratorKind) -> Film {
-    let desc = prism::loader::load(path, BuildQuality::Medium).unwrap();
+    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
     let config = RenderConfig {
         settings: settings.clone(),
         integrator: kind,

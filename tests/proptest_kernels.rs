@@ -28,10 +28,10 @@
 use std::sync::Arc;
 
 use glam::{DVec3, Quat, Vec3, Vec3A};
-use prism::math::Ray;
-use prism::mesh::WatertightRay;
-use prism::optics::{OFFSET_ULPS, offset_origin, offset_origin_relative};
-use prism::shapes::Shape;
+use prism::core::math::Ray;
+use prism::core::optics::{OFFSET_ULPS, offset_origin, offset_origin_relative};
+use prism::geometry::mesh::WatertightRay;
+use prism::geometry::shapes::Shape;
 use proptest::prelude::*;
 
 const EPS: f64 = f32::EPSILON as f64;

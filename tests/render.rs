@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use glam::{Quat, Vec2, Vec3, Vec3A};
-use prism::camera::{Camera, CameraRays};
-use prism::film::Film;
-use prism::integrator::RenderSettings;
-use prism::mesh::BuildQuality;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::integrators::RenderSettings;
+use prism::scene::camera::{Camera, CameraRays};
 use prism::systems::{self, RenderConfig};
 
 fn assets() -> PathBuf {
@@ -23,8 +23,12 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-fn render_file(path: &Path, width: u32, height: u32) -> (Film, prism::stats::RenderCounters) {
-    let desc = prism::loader::load(path, BuildQuality::Medium).unwrap();
+fn render_file(
+    path: &Path,
+    width: u32,
+    height: u32,
+) -> (Film, prism::integrators::counters::RenderCounters) {
+    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
     let config = RenderConfig {
         settings: RenderSettings {
             width,
@@ -62,7 +66,7 @@ fn render_exr_with_binary(scene: &Path, dir: &Path, width: u32, height: u32) -> 
         "{}",
         String::from_utf8_lossy(&status.stderr)
     );
-    prism::output::read_image(&out).unwrap()
+    prism::image::output::read_image(&out).unwrap()
 }
 
 const ALBEDO: f32 = 0.5;
@@ -377,7 +381,7 @@ fn same_seed_same_image_whatever_the_thread_count() {
             .build()
             .unwrap();
         pool.install(|| {
-            let desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+            let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
             let config = RenderConfig {
                 settings: RenderSettings {
                     width: 40,
@@ -413,9 +417,9 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
     // point's shadow ray (offset off the surface) towards a light must not
     // hit the same shape again. Before Newton refinement of the roots, a
     // quarter of the cone's lit points shadowed themselves.
-    use prism::math::Ray;
-    use prism::optics::offset_origin_relative;
-    use prism::shapes::Shape;
+    use prism::core::math::Ray;
+    use prism::core::optics::offset_origin_relative;
+    use prism::geometry::shapes::Shape;
     let shapes = [
         Shape::Cone {
             radius: 0.7,

@@ -5,13 +5,13 @@
 //! whole scene under translation and scaling.
 
 use glam::{Vec2, Vec3, Vec3A};
-use prism::film::Film;
-use prism::integrator::{IntegratorKind, RenderSettings};
-use prism::material::SurfaceSample;
-use prism::math::Color;
-use prism::mesh::BuildQuality;
-use prism::shading::{Interaction, RayKind, scatter};
+use prism::core::math::Color;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::scene::material::SurfaceSample;
 use prism::systems::{self, Frame, RenderConfig};
+use prism::transport::interaction::{Interaction, RayKind, scatter};
 
 /// Every integrator the tests run; adding one is one line.
 const KINDS: &[IntegratorKind] = &[IntegratorKind::Recursive, IntegratorKind::Wavefront];
@@ -33,7 +33,7 @@ fn try_render(
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, text).unwrap();
-    let desc = prism::loader::load(&path, BuildQuality::Medium)?;
+    let desc = prism::io::load(&path, BuildQuality::Medium)?;
     let config = RenderConfig {
         settings: RenderSettings {
             width,
@@ -370,8 +370,8 @@ material = {{ color = {ALBEDO} }}
     }
     // Explicit zero-length vertex normals through the library: the
     // shading normal falls back to the geometric one.
-    use prism::desc::{Geometry, ObjectDesc};
-    use prism::mesh::{Mesh, MeshData, NormalMode};
+    use prism::geometry::mesh::{Mesh, MeshData, NormalMode};
+    use prism::io::desc::{Geometry, ObjectDesc};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("s.toml");
     std::fs::write(&path, lit_floor("")).unwrap();
@@ -382,7 +382,7 @@ material = {{ color = {ALBEDO} }}
         Vec3::new(3.0, 0.0, -3.0),
     ];
     for &kind in KINDS {
-        let mut desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+        let mut desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
         desc.objects.push(ObjectDesc {
             name: None,
             transform: Default::default(),
@@ -400,7 +400,7 @@ material = {{ color = {ALBEDO} }}
                 )
                 .unwrap(),
             )),
-            material: prism::material::Material {
+            material: prism::scene::material::Material {
                 base_color: Color::splat(ALBEDO),
                 ..Default::default()
             },
@@ -681,8 +681,8 @@ fn scale_invariance() {
 /// at 1e4), and while the top-level BVH used obvhs's own node test, which
 /// rejects every box closer than `t = 1e-4` (missed occluders at 1e-4).
 /// With hit points from `ShapeHit::point` / `MeshSurface::point` through
-/// the instance transform, `prism::mesh::traverse_bvh` for the top level
-/// and `prism::optics::offset_origin_relative` in `src/shading.rs`: 100.00 %
+/// the instance transform, `prism::geometry::mesh::traverse_bvh` for the top level
+/// and `prism::core::optics::offset_origin_relative` in `src/shading.rs`: 100.00 %
 /// at 1e-4 and at 1e4, 91.9 % at 1e5, no acne, for both integrators.
 #[test]
 fn scale_invariance_strict() {

@@ -6,20 +6,20 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use glam::{Affine3A, Quat, Vec3, Vec3A};
-use prism::camera::Camera;
-use prism::integrator::{IntegratorKind, RenderSettings, Transport};
-use prism::light::Light;
-use prism::material::Material;
-use prism::math::{Color, Ray};
-use prism::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode};
+use prism::accel::tlas::{MoveStrategy, TlasPolicy, TlasUpdate};
+use prism::core::math::{Color, Ray};
+use prism::geometry::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode};
+use prism::geometry::shapes::Shape;
+use prism::geometry::transform::Transform;
+use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::scene::camera::Camera;
+use prism::scene::light::Light;
+use prism::scene::material::Material;
 use prism::scene::{Hit, RenderScene};
-use prism::shapes::Shape;
 use prism::systems::sync::{SceneSync, scene_from_scratch};
 use prism::systems::{
     self, Frame, PrismPlugin, ProgressiveRendering, RenderConfig, SceneAccel, run_frame,
 };
-use prism::tlas::{MoveStrategy, TlasPolicy, TlasUpdate};
-use prism::transform::Transform;
 
 /// A small deterministic generator (splitmix64) so that failures replay.
 struct Rng(u64);
@@ -50,7 +50,7 @@ fn meshes() -> Vec<Arc<Mesh>> {
     [(2, 3, 48, 8), (3, 4, 40, 6), (2, 5, 24, 5)]
         .into_iter()
         .map(|(p, q, seg, sides)| {
-            let data = prism::procedural::torus_knot(p, q, 1.0, 0.3, seg, sides);
+            let data = prism::geometry::procedural::torus_knot(p, q, 1.0, 0.3, seg, sides);
             Arc::new(Mesh::new("knot", data, NormalMode::Smooth, BuildQuality::Medium).unwrap())
         })
         .collect()
@@ -218,7 +218,7 @@ fn compare_with_scratch(world: &mut World, rng: &mut Rng, step: usize) {
             "{what}: occlusion"
         );
     }
-    for (c, chunk) in rays.chunks(prism::packet::LANES).enumerate() {
+    for (c, chunk) in rays.chunks(prism::accel::packet::LANES).enumerate() {
         let mut a = vec![None; chunk.len()];
         let mut b = vec![None; chunk.len()];
         scene.intersect_packet(chunk, &mut a);
@@ -353,13 +353,13 @@ fn random_updates_match_scratch_with_reinsertion_and_no_rebuilds() {
 }
 
 /// Renders `world`'s scene once, from scratch, with `spp` samples.
-fn reference_film(world: &mut World, spp: u32) -> prism::film::Film {
+fn reference_film(world: &mut World, spp: u32) -> prism::image::film::Film {
     let (scene, _) = scene_from_scratch(world, Color::ZERO, BuildQuality::Medium).unwrap();
     let mut settings = world.resource::<RenderConfig>().settings.clone();
     settings.spp = spp;
     let mut q = world.query::<&Camera>();
     let camera = q.single(world).unwrap().clone();
-    prism::integrator::recursive::render(&scene, &camera, &settings, None).0
+    prism::integrators::recursive::render(&scene, &camera, &settings, None).0
 }
 
 fn progressive_world(spp: u32, transport: Transport) -> (World, Schedule, Entity) {
@@ -594,7 +594,7 @@ fn area_lights_follow_moves_and_material_changes() {
             let mut q = world.query::<&Camera>();
             let camera = q.single(world).unwrap().clone();
             let reference =
-                prism::integrator::recursive::render(&scene, &camera, &settings, None).0;
+                prism::integrators::recursive::render(&scene, &camera, &settings, None).0;
             for (p, r) in film.pixels.iter().zip(&reference.pixels) {
                 let d = (*p - *r).abs().max_element();
                 assert!(

@@ -5,11 +5,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use glam::Vec3;
-use prism::film::Film;
-use prism::integrator::{RenderSettings, Transport};
-use prism::mesh::BuildQuality;
-use prism::metrics;
-use prism::output::PngOptions;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::image::metrics;
+use prism::image::output::PngOptions;
+use prism::integrators::{RenderSettings, Transport};
 use prism::systems::{self, RenderConfig};
 
 fn prism() -> Command {
@@ -41,7 +41,7 @@ fn lit_cornell(dir: &Path) -> PathBuf {
 }
 
 fn render(scene: &Path, settings: RenderSettings) -> Film {
-    let desc = prism::loader::load(scene, BuildQuality::Medium).unwrap();
+    let desc = prism::io::load(scene, BuildQuality::Medium).unwrap();
     let config = RenderConfig {
         settings,
         ..Default::default()
@@ -141,8 +141,8 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
         *p += Vec3::splat(0.5);
     }
     let (a, b) = (d.join("a.exr"), d.join("b.exr"));
-    prism::output::write_image(&a, &test, &PngOptions::default()).unwrap();
-    prism::output::write_image(&b, &reference, &PngOptions::default()).unwrap();
+    prism::image::output::write_image(&a, &test, &PngOptions::default()).unwrap();
+    prism::image::output::write_image(&b, &reference, &PngOptions::default()).unwrap();
 
     let out = prism()
         .arg("compare")
@@ -196,7 +196,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
         .unwrap();
     assert_clean_failure(&out, &["missing.exr"]);
     let small = d.join("small.exr");
-    prism::output::write_image(&small, &Film::new(2, 2), &PngOptions::default()).unwrap();
+    prism::image::output::write_image(&small, &Film::new(2, 2), &PngOptions::default()).unwrap();
     let out = prism().arg("compare").arg(&small).arg(&b).output().unwrap();
     assert_clean_failure(&out, &["2x2", "4x3"]);
     let garbage = d.join("garbage.exr");
@@ -341,7 +341,7 @@ fn tradeoff_rejects_bad_input_before_writing() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let small = d.join("small.exr");
-    prism::output::write_image(&small, &Film::new(4, 4), &PngOptions::default()).unwrap();
+    prism::image::output::write_image(&small, &Film::new(4, 4), &PngOptions::default()).unwrap();
     let out_dir = d.join("run");
     let out = tradeoff(&out_dir, &["--reference", small.to_str().unwrap()]);
     assert_clean_failure(&out, &["4x4", "8x8"]);

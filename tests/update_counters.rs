@@ -9,20 +9,20 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use glam::Vec3;
-use prism::camera::Camera;
-use prism::integrator::RenderSettings;
-use prism::light::Light;
-use prism::material::Material;
-use prism::math::{Color, Ray};
-use prism::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode, mesh_bvh_builds};
-use prism::shapes::Shape;
+use prism::accel::tlas::{TlasCounters, TlasUpdate};
+use prism::core::math::{Color, Ray};
+use prism::geometry::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode, mesh_bvh_builds};
+use prism::geometry::shapes::Shape;
+use prism::geometry::transform::Transform;
+use prism::integrators::RenderSettings;
+use prism::scene::camera::Camera;
+use prism::scene::light::Light;
+use prism::scene::material::Material;
 use prism::systems::sync::SceneSync;
 use prism::systems::{Frame, PrismPlugin, SceneAccel, run_frame};
-use prism::tlas::{TlasCounters, TlasUpdate};
-use prism::transform::Transform;
 
 fn knot(p: u32, q: u32) -> Arc<Mesh> {
-    let data = prism::procedural::torus_knot(p, q, 1.0, 0.3, 64, 8);
+    let data = prism::geometry::procedural::torus_knot(p, q, 1.0, 0.3, 64, 8);
     Arc::new(Mesh::new("knot", data, NormalMode::Smooth, BuildQuality::Medium).unwrap())
 }
 

@@ -25,8 +25,8 @@
 use std::collections::HashMap;
 
 use glam::{DVec3, Quat, Vec3, Vec3A};
-use prism::math::Ray;
-use prism::mesh::{BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
+use prism::core::math::Ray;
+use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
 
 /// Each edge (sorted vertex pair) with the triangles that share it.
 type EdgeTriangles = Vec<([u32; 2], Vec<usize>)>;
@@ -694,11 +694,11 @@ fn parallel_and_axis_rays_give_finite_results() {
 /// has none), 868 of the 200,000 rays here (0.4 %) passed through the
 /// cube; e.g. from (157.42471, -56.16274, -149.45332) along (-158.42471,
 /// 55.16274, 148.45332) the single ray hit at t = 1 and the packet missed.
-/// Boxes are now grown by the margin of `prism::mesh::traverse_bvh` and
+/// Boxes are now grown by the margin of `prism::geometry::mesh::traverse_bvh` and
 /// zero direction components get an inside test.
 #[test]
 fn packet_traversal_has_no_leaks() {
-    use prism::packet::{LANES, Packet};
+    use prism::accel::packet::{LANES, Packet};
     let solid = cube("unit cube", Vec3::ZERO, 1.0, Quat::IDENTITY);
     let mesh = solid.mesh();
     let mut rng = Rng(15);
@@ -732,7 +732,7 @@ fn packet_traversal_has_no_leaks() {
 /// the single-ray hits (streams of 1000 rays, any direction octant mixed).
 #[test]
 fn stream_traversal_has_no_leaks() {
-    use prism::stream::Stream;
+    use prism::accel::stream::Stream;
     let solid = cube("unit cube", Vec3::ZERO, 1.0, Quat::IDENTITY);
     let mesh = solid.mesh();
     let mut rng = Rng(16);

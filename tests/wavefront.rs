@@ -3,10 +3,10 @@
 use std::path::{Path, PathBuf};
 
 use bevy_ecs::prelude::*;
-use prism::film::Film;
-use prism::integrator::{IntegratorKind, RenderSettings};
-use prism::material::MaterialClass;
-use prism::mesh::BuildQuality;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{
     self, BatchSize, Bounce, CurrentRays, EscapedRays, HitQueues, NextRays, ShadowRays, StartBatch,
     WavefrontFrame,
@@ -28,7 +28,7 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
 }
 
 fn render(path: &Path, kind: IntegratorKind, s: &RenderSettings, batch: usize) -> Frame {
-    let desc = prism::loader::load(path, BuildQuality::Medium).unwrap();
+    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
     let mut world = World::new();
     let mut schedule = systems::setup(&mut world);
     let background = desc.background;
@@ -98,7 +98,7 @@ fn both_integrators_give_the_same_image_on_every_scene() {
     let scenes = scenes();
     assert!(scenes.len() >= 3);
     for path in scenes {
-        let desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+        let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
         if desc.cameras.is_empty() {
             continue;
         }
@@ -187,7 +187,7 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::Temp
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("s.toml");
     std::fs::write(&path, scene_toml).unwrap();
-    let desc = prism::loader::load(&path, BuildQuality::Medium).unwrap();
+    let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
     let mut world = World::new();
     let mut schedule = systems::setup(&mut world);
     let cameras = systems::spawn_scene(&mut world, desc);
@@ -204,17 +204,17 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::Temp
         .clone()
         .unwrap();
     let camera = world
-        .query::<&prism::camera::Camera>()
+        .query::<&prism::scene::camera::Camera>()
         .single(&world)
         .unwrap()
         .clone();
     let config = world.resource::<RenderConfig>().settings.clone();
     let classes: Vec<MaterialClass> = scene.materials.iter().map(|m| m.class()).collect();
-    let features = prism::features::SceneFeatures::of(&scene);
+    let features = prism::scene::features::SceneFeatures::of(&scene);
     let shadows = features.needs_shadow_rays(config.transport);
     world.insert_resource(WavefrontFrame {
-        camera: prism::camera::CameraRays::new(&camera, config.width, config.height),
-        batches: prism::integrator::wavefront::batch_ranges(&config, 1 << 20).collect(),
+        camera: prism::scene::camera::CameraRays::new(&camera, config.width, config.height),
+        batches: prism::integrators::wavefront::batch_ranges(&config, 1 << 20).collect(),
         batch: 0,
         scene,
         classes,

@@ -10,8 +10,8 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
-use prism::loader::gltf::load_gltf_bytes;
-use prism::mesh::BuildQuality;
+use prism::io::gltf::load_gltf_bytes;
+use prism::geometry::mesh::BuildQuality;
 
 fn gltf_path() -> &'static PathBuf {
     static PATH: OnceLock<PathBuf> = OnceLock::new();

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
-use prism::loader::scene_file::parse_scene_file;
-use prism::mesh::BuildQuality;
+use prism::io::scene_file::parse_scene_file;
+use prism::geometry::mesh::BuildQuality;
 
 fn scene_path() -> &'static PathBuf {
     static PATH: OnceLock<PathBuf> = OnceLock::new();

@@ -1,0 +1,433 @@
+//! `prism bench`: the recursive and the wavefront integrator on the same
+//! scenes, alternately, and the closest-hit throughput of single-ray and
+//! packet traversal.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::{Vec2, Vec3A};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use prism::accel::packet::LANES;
+use prism::core::error::{Error, Result};
+use prism::core::math::{Ray, orthonormal_basis};
+use prism::core::rng::Sampler;
+use prism::geometry::mesh::BuildQuality;
+use prism::integrators::counters::RayCountsJson;
+use prism::integrators::wavefront::StageSeconds;
+use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::scene::camera::CameraRays;
+use prism::scene::{RenderScene, StreamScratch};
+use prism::systems::{self, Frame, RenderConfig};
+
+/// Options of `prism bench`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Scene files to measure.
+    #[arg(required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Renders per integrator and scene (alternating); the median and the fastest are reported.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Worker threads [default: one per core].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Image width [default: the scene's, else 640].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height [default: the scene's, else 480].
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Samples per pixel [default: the scene's, else 1].
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Maximum depth [default: the scene's, else 8].
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Light transport [default: the scene's, else whitted].
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportChoice>,
+    /// Paths per wavefront batch.
+    #[arg(long, default_value_t = prism::integrators::wavefront::DEFAULT_BATCH_PATHS)]
+    pub batch_paths: usize,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Light transport choices on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TransportChoice {
+    /// Whitted transport.
+    Whitted,
+    /// Path tracing.
+    Path,
+}
+
+/// One integrator on one scene.
+#[derive(Serialize, Debug, Clone)]
+pub struct IntegratorResult {
+    /// Integrator name.
+    pub integrator: &'static str,
+    /// Median render seconds.
+    pub median_seconds: f64,
+    /// Fastest run's render seconds: on a shared machine interference only
+    /// slows runs down, so this is the steadier figure.
+    pub fastest_seconds: f64,
+    /// Every run's render seconds, in order.
+    pub runs_seconds: Vec<f64>,
+    /// Rays by kind (identical in every run).
+    pub rays: RayCountsJson,
+    /// All rays over the median time.
+    pub mrays_per_second: f64,
+    /// Wavefront only: largest queue memory.
+    pub peak_queue_bytes: Option<usize>,
+    /// Wavefront only: stage seconds of the median run.
+    pub stage_seconds: Option<StageSeconds>,
+}
+
+/// Closest-hit traversal throughput, Mrays/s.
+#[derive(Serialize, Debug, Clone, Copy)]
+pub struct Throughput {
+    /// Camera rays, one at a time.
+    pub camera_single: f64,
+    /// Camera rays, packets of neighbouring pixels (what the wavefront
+    /// does when the scene has no mesh).
+    pub camera_packets: f64,
+    /// Camera rays through the top level in packets and every mesh as
+    /// streams (what the wavefront does when the scene has meshes).
+    pub camera_streams: f64,
+    /// Incoherent secondary rays (cosine-distributed from the camera hits), one at a time.
+    pub secondary_single: f64,
+    /// The same secondary rays in packets of consecutive rays.
+    pub secondary_packets: f64,
+    /// The same packets through the top level, meshes one lane at a time
+    /// (what the wavefront does with shadow rays).
+    pub secondary_top_level_packets: f64,
+    /// The same secondary rays through the top level in packets and every
+    /// mesh as streams of 1024 rays split by direction octant (what the
+    /// wavefront does with closest-hit rays when the scene has a mesh).
+    pub secondary_streams: f64,
+    /// Number of secondary rays.
+    pub secondary_rays: usize,
+}
+
+/// Everything measured on one scene.
+#[derive(Serialize, Debug, Clone)]
+pub struct SceneResult {
+    /// Scene file.
+    pub scene: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Maximum depth.
+    pub max_depth: u32,
+    /// Threads.
+    pub threads: usize,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Recursive, then wavefront.
+    pub integrators: Vec<IntegratorResult>,
+    /// Recursive median over wavefront median.
+    pub speedup_wavefront: f64,
+    /// Recursive fastest run over wavefront fastest run.
+    pub speedup_wavefront_fastest: f64,
+    /// Traversal throughput.
+    pub closest_hit_mrays: Throughput,
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[s.len() / 2]
+}
+
+/// Runs the benchmark and prints the report.
+pub fn run(args: BenchArgs) -> Result<()> {
+    if args.runs == 0 {
+        return Err(Error::Invalid("--runs must be at least 1".into()));
+    }
+    if args.batch_paths == 0 {
+        return Err(Error::Invalid("--batch-paths must be at least 1".into()));
+    }
+    let (pool, threads) = crate::thread_pool(args.threads)?;
+    let mut results = Vec::new();
+    for scene in &args.scenes {
+        let r = pool.install(|| bench_scene(scene, &args, threads))?;
+        if !args.json {
+            print_table(&r);
+        }
+        results.push(r);
+    }
+    if args.json {
+        let text = serde_json::to_string_pretty(&results)
+            .map_err(|e| Error::Invalid(format!("cannot write JSON: {e}")))?;
+        println!("{text}");
+    }
+    Ok(())
+}
+
+fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<SceneResult> {
+    let desc = prism::io::load(path, BuildQuality::Medium)?;
+    let settings = prism::io::desc::SettingsDesc {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        transport: args.transport.map(|t| match t {
+            TransportChoice::Whitted => prism::integrators::Transport::Whitted,
+            TransportChoice::Path => prism::integrators::Transport::Path,
+        }),
+        ..Default::default()
+    }
+    .resolve(&desc.settings);
+    settings
+        .validate()
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    if desc.cameras.is_empty() {
+        return Err(Error::load(path, "the scene has no camera"));
+    }
+    let background = desc.background;
+    let mut world = bevy_ecs::world::World::new();
+    let mut schedule = systems::setup(&mut world);
+    let cameras = systems::spawn_scene(&mut world, desc);
+    world.insert_resource(systems::wavefront::BatchSize(args.batch_paths));
+    world.insert_resource(RenderConfig {
+        settings: settings.clone(),
+        camera: Some(cameras[0]),
+        background,
+        ..Default::default()
+    });
+
+    let mut times = [Vec::new(), Vec::new()];
+    let mut frames: [Vec<Frame>; 2] = [Vec::new(), Vec::new()];
+    for _ in 0..args.runs {
+        for (k, kind) in IntegratorKind::ALL.into_iter().enumerate() {
+            world.resource_mut::<RenderConfig>().integrator = kind;
+            schedule.run(&mut world);
+            let frame = std::mem::take(&mut *world.resource_mut::<Frame>());
+            if let Some(e) = &frame.error {
+                return Err(Error::Invalid(format!("{}: {e}", path.display())));
+            }
+            times[k].push(frame.render_seconds);
+            frames[k].push(frame);
+        }
+    }
+    let scene = world
+        .resource::<systems::SceneAccel>()
+        .scene
+        .clone()
+        .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
+    let camera = world
+        .get::<prism::scene::camera::Camera>(cameras[0])
+        .cloned()
+        .ok_or_else(|| Error::Invalid("camera entity vanished".into()))?;
+
+    let mut integrators = Vec::new();
+    for (k, kind) in IntegratorKind::ALL.into_iter().enumerate() {
+        let med = median(&times[k]);
+        let idx = times[k].iter().position(|&t| t == med).unwrap_or(0);
+        let f = &frames[k][idx];
+        integrators.push(IntegratorResult {
+            integrator: kind.name(),
+            median_seconds: med,
+            fastest_seconds: times[k].iter().copied().fold(f64::INFINITY, f64::min),
+            runs_seconds: times[k].clone(),
+            rays: f.counters.rays.into(),
+            mrays_per_second: f.counters.rays.total() as f64 / med.max(1e-9) / 1e6,
+            peak_queue_bytes: f.wavefront.map(|w| w.peak_queue_bytes),
+            stage_seconds: f.wavefront.map(|w| w.stages),
+        });
+    }
+    let speedup = integrators[0].median_seconds / integrators[1].median_seconds.max(1e-12);
+    let speedup_fastest =
+        integrators[0].fastest_seconds / integrators[1].fastest_seconds.max(1e-12);
+    Ok(SceneResult {
+        scene: path.display().to_string(),
+        width: settings.width,
+        height: settings.height,
+        spp: settings.spp,
+        max_depth: settings.max_depth,
+        threads,
+        triangles: scene.triangle_count(),
+        integrators,
+        speedup_wavefront: speedup,
+        speedup_wavefront_fastest: speedup_fastest,
+        closest_hit_mrays: throughput(&scene, &camera, &settings, args.runs),
+    })
+}
+
+/// Times `f` `runs` times over `n` rays and returns the best Mrays/s.
+fn best_rate(n: usize, runs: usize, mut f: impl FnMut()) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..runs.max(1) {
+        let t = Instant::now();
+        f();
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    n as f64 / best.max(1e-12) / 1e6
+}
+
+fn trace_single(scene: &RenderScene, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map(|c| {
+            c.iter()
+                .filter(|r| scene.intersect(r, 0.0, f32::INFINITY).is_some())
+                .count()
+        })
+        .sum()
+}
+
+fn trace_packets(scene: &RenderScene, rays: &[Ray], mesh_packets: bool) -> usize {
+    rays.par_chunks(1024)
+        .map(|c| {
+            let mut out = [None; LANES];
+            c.chunks(LANES)
+                .map(|p| {
+                    scene.intersect_packet_with(p, &mut out, mesh_packets);
+                    out[..p.len()].iter().filter(|h| h.is_some()).count()
+                })
+                .sum::<usize>()
+        })
+        .sum()
+}
+
+fn trace_streams(scene: &RenderScene, rays: &[Ray]) -> usize {
+    rays.par_chunks(1024)
+        .map_init(
+            || (StreamScratch::default(), Vec::new()),
+            |(scratch, out), c| {
+                out.clear();
+                out.resize(c.len(), None);
+                scene.intersect_stream(c, out, scratch);
+                out.iter().filter(|h| h.is_some()).count()
+            },
+        )
+        .sum()
+}
+
+/// Closest-hit throughput of camera rays and of incoherent secondary rays
+/// leaving the camera rays' hits in cosine-distributed directions.
+fn throughput(
+    scene: &RenderScene,
+    camera: &prism::scene::camera::Camera,
+    s: &RenderSettings,
+    runs: usize,
+) -> Throughput {
+    let cam = CameraRays::new(camera, s.width, s.height);
+    let camera_rays: Vec<Ray> = (0..s.height)
+        .flat_map(|y| (0..s.width).map(move |x| (x, y)))
+        .map(|(x, y)| cam.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
+        .collect();
+    let secondary: Vec<Ray> = camera_rays
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let h = scene.intersect(r, 0.0, f32::INFINITY)?;
+            let n = if h.geometric_normal.dot(r.direction) < 0.0 {
+                h.geometric_normal
+            } else {
+                -h.geometric_normal
+            };
+            let mut rng = Sampler::new(1, i as u32, 0);
+            let (u1, u2) = (rng.next_f32(), rng.next_f32());
+            let (r2, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
+            let (t, b) = orthonormal_basis(n);
+            let d: Vec3A = t * (r2 * phi.cos()) + b * (r2 * phi.sin()) + n * (1.0 - u1).sqrt();
+            Some(Ray::new(
+                prism::core::optics::offset_origin(h.point, n),
+                d.normalize(),
+            ))
+        })
+        .collect();
+    Throughput {
+        camera_single: best_rate(camera_rays.len(), runs, || {
+            std::hint::black_box(trace_single(scene, &camera_rays));
+        }),
+        camera_packets: best_rate(camera_rays.len(), runs, || {
+            std::hint::black_box(trace_packets(scene, &camera_rays, true));
+        }),
+        camera_streams: best_rate(camera_rays.len(), runs, || {
+            std::hint::black_box(trace_streams(scene, &camera_rays));
+        }),
+        secondary_single: best_rate(secondary.len(), runs, || {
+            std::hint::black_box(trace_single(scene, &secondary));
+        }),
+        secondary_packets: best_rate(secondary.len(), runs, || {
+            std::hint::black_box(trace_packets(scene, &secondary, true));
+        }),
+        secondary_top_level_packets: best_rate(secondary.len(), runs, || {
+            std::hint::black_box(trace_packets(scene, &secondary, false));
+        }),
+        secondary_streams: best_rate(secondary.len(), runs, || {
+            std::hint::black_box(trace_streams(scene, &secondary));
+        }),
+        secondary_rays: secondary.len(),
+    }
+}
+
+fn print_table(r: &SceneResult) {
+    println!(
+        "{}: {}x{}, {} spp, depth {}, {} triangles, {} threads",
+        r.scene, r.width, r.height, r.spp, r.max_depth, r.triangles, r.threads
+    );
+    println!(
+        "  {:<10} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11}",
+        "integrator",
+        "median s",
+        "fastest s",
+        "Mrays/s",
+        "camera",
+        "shadow",
+        "reflection",
+        "refraction",
+        "queue MB"
+    );
+    for i in &r.integrators {
+        println!(
+            "  {:<10} {:>9.4} {:>9.4} {:>8.2} {:>9} {:>9} {:>10} {:>10} {:>11}",
+            i.integrator,
+            i.median_seconds,
+            i.fastest_seconds,
+            i.mrays_per_second,
+            i.rays.camera,
+            i.rays.shadow,
+            i.rays.reflection,
+            i.rays.refraction,
+            i.peak_queue_bytes
+                .map_or("-".to_string(), |b| format!("{:.1}", b as f64 / 1e6)),
+        );
+    }
+    if let Some(st) = r.integrators.iter().find_map(|i| i.stage_seconds) {
+        println!(
+            "  wavefront stages (s): generate {:.4}, intersect {:.4}, escaped {:.4}, shade {:.4}, shadows {:.4}, film {:.4}",
+            st.generate_camera_rays,
+            st.intersect_closest,
+            st.handle_escaped_rays,
+            st.shade,
+            st.trace_shadow_rays,
+            st.update_film
+        );
+    }
+    println!(
+        "  speedup of the wavefront over recursive: {:.2}x (medians), {:.2}x (fastest runs)",
+        r.speedup_wavefront, r.speedup_wavefront_fastest
+    );
+    let t = r.closest_hit_mrays;
+    println!(
+        "  closest-hit Mrays/s: camera rays {:.2} single, {:.2} packets, {:.2} streams; secondary rays ({}) {:.2} single, {:.2} packets, {:.2} top-level packets, {:.2} streams",
+        t.camera_single,
+        t.camera_packets,
+        t.camera_streams,
+        t.secondary_rays,
+        t.secondary_single,
+        t.secondary_packets,
+        t.secondary_top_level_packets,
+        t.secondary_streams
+    );
+    println!();
+}

@@ -1,0 +1,656 @@
+//! `prism tradeoff`: how much accuracy each speed knob buys or costs.
+//!
+//! Renders (or reads) a converged path-traced reference, then renders the
+//! scene once per knob value, changing one knob at a time away from a base
+//! configuration, and measures each render's time and its error against
+//! the reference. Writes `tradeoff.csv` and a plot of error against time
+//! (`tradeoff.png`, `tradeoff.svg`) with the Pareto front marked.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use clap::ValueEnum;
+use indicatif::ProgressBar;
+
+use prism::core::error::{Error, Result};
+use prism::geometry::mesh::BuildQuality;
+use prism::image::film::Film;
+use prism::image::metrics::{self, Metrics};
+use prism::image::output::PngOptions;
+use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::io::desc::{SceneDesc, SettingsDesc};
+use prism::systems::{self, RenderConfig};
+
+mod plot;
+
+/// Options of `prism tradeoff`.
+#[derive(clap::Args, Debug)]
+pub struct TradeoffArgs {
+    /// Scene file (.toml, .gltf or .glb).
+    pub scene: PathBuf,
+    /// Folder for tradeoff.csv, tradeoff.png, tradeoff.svg and (when
+    /// rendered) reference.exr; created if missing.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Use this EXR as the reference instead of rendering one. It must
+    /// have the base image size.
+    #[arg(long, value_name = "FILE.exr")]
+    pub reference: Option<PathBuf>,
+    /// Samples per pixel of the rendered reference.
+    #[arg(long, default_value_t = 1024)]
+    pub reference_spp: u32,
+    /// Maximum depth of the rendered reference (path transport, no
+    /// contribution threshold, the base's light samples and roulette).
+    #[arg(long, default_value_t = 16)]
+    pub reference_max_depth: u32,
+    /// Seed of the rendered reference [default: the base seed + 1, so the
+    /// reference's samples are independent of the sweep's].
+    #[arg(long)]
+    pub reference_seed: Option<u64>,
+    /// Knobs to sweep, comma-separated [default: all].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub knobs: Vec<Knob>,
+    /// Base image width [default: the scene's, else 640].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Base image height [default: the scene's, else 480].
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Base samples per pixel [default: the scene's, else 1].
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Base maximum depth [default: the scene's, else 8].
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Base contribution threshold [default: the scene's, else 0.001].
+    #[arg(long)]
+    pub min_contribution: Option<f32>,
+    /// Base light samples per area light [default: the scene's, else 1].
+    #[arg(long)]
+    pub light_samples: Option<u32>,
+    /// Base Russian roulette start depth [default: the scene's, else 3].
+    #[arg(long, value_name = "DEPTH")]
+    pub rr_depth: Option<u32>,
+    /// Base seed [default: the scene's, else 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Integrator for every render.
+    #[arg(long, value_enum, default_value_t = crate::IntegratorArg::Recursive)]
+    pub integrator: crate::IntegratorArg,
+    /// Renders per configuration; the median time is reported (the image
+    /// is the same every time).
+    #[arg(long, default_value_t = 1)]
+    pub runs: usize,
+    /// Worker threads [default: one per core].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// TrueType font for the plot's text [default: DejaVu Sans from the
+    /// usual system folders]. Without one the plot is drawn unlabelled.
+    #[arg(long, value_name = "FILE.ttf")]
+    pub font: Option<PathBuf>,
+    /// No progress bar, table or summary line.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// A setting that trades speed against accuracy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Knob {
+    /// Samples per pixel: 1, 2, 4, 8, 16, 32, 64.
+    Spp,
+    /// Maximum depth: 0, 1, 2, 4, 6, 8, 12.
+    MaxDepth,
+    /// Contribution threshold: 0, 0.001, 0.01, 0.03, 0.1, 0.3.
+    MinContribution,
+    /// Shadow rays per area light per hit: 1, 2, 4, 8.
+    LightSamples,
+    /// Russian roulette: off, from bounce 1, from the base depth (3).
+    RussianRoulette,
+    /// BVH build preset, fastest to very slow (the scene is reloaded).
+    Bvh,
+    /// Light transport: Whitted against path tracing.
+    Transport,
+}
+
+impl Knob {
+    /// Every knob, in sweep order.
+    pub const ALL: [Knob; 7] = [
+        Knob::Spp,
+        Knob::MaxDepth,
+        Knob::MinContribution,
+        Knob::LightSamples,
+        Knob::RussianRoulette,
+        Knob::Bvh,
+        Knob::Transport,
+    ];
+
+    /// Name as written in the CSV and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Knob::Spp => "spp",
+            Knob::MaxDepth => "max-depth",
+            Knob::MinContribution => "min-contribution",
+            Knob::LightSamples => "light-samples",
+            Knob::RussianRoulette => "russian-roulette",
+            Knob::Bvh => "bvh",
+            Knob::Transport => "transport",
+        }
+    }
+}
+
+const SPP_VALUES: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
+const DEPTH_VALUES: [u32; 7] = [0, 1, 2, 4, 6, 8, 12];
+const MIN_CONTRIBUTION_VALUES: [f32; 6] = [0.0, 0.001, 0.01, 0.03, 0.1, 0.3];
+const LIGHT_SAMPLE_VALUES: [u32; 4] = [1, 2, 4, 8];
+const RR_VALUES: [Option<u32>; 3] = [
+    None,
+    Some(1),
+    Some(prism::integrators::DEFAULT_RR_START_DEPTH),
+];
+const BVH_VALUES: [BuildQuality; 6] = [
+    BuildQuality::Fastest,
+    BuildQuality::VeryFast,
+    BuildQuality::Fast,
+    BuildQuality::Medium,
+    BuildQuality::Slow,
+    BuildQuality::VerySlow,
+];
+const TRANSPORT_VALUES: [Transport; 2] = [Transport::Whitted, Transport::Path];
+
+/// The name of a BVH preset, as on `prism render --bvh-quality`.
+pub fn bvh_name(q: BuildQuality) -> &'static str {
+    match q {
+        BuildQuality::Fastest => "fastest",
+        BuildQuality::VeryFast => "very-fast",
+        BuildQuality::Fast => "fast",
+        BuildQuality::Medium => "medium",
+        BuildQuality::Slow => "slow",
+        BuildQuality::VerySlow => "very-slow",
+    }
+}
+
+fn rr_name(rr: Option<u32>) -> String {
+    rr.map_or_else(|| "off".to_string(), |d| d.to_string())
+}
+
+/// One render configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// Render settings.
+    pub settings: RenderSettings,
+    /// Mesh and top-level BVH preset.
+    pub bvh: BuildQuality,
+}
+
+/// One planned render: which knob it varies and to what.
+#[derive(Clone, Debug)]
+pub struct Planned {
+    /// Knob name, or `base` for the base configuration.
+    pub knob: &'static str,
+    /// The knob's value, as text.
+    pub value: String,
+    /// The configuration.
+    pub config: Config,
+}
+
+impl Knob {
+    /// The values swept, as text, in order (the CSV's `value` column).
+    pub fn values(self) -> Vec<String> {
+        match self {
+            Knob::Spp => SPP_VALUES.iter().map(|v| v.to_string()).collect(),
+            Knob::MaxDepth => DEPTH_VALUES.iter().map(|v| v.to_string()).collect(),
+            Knob::MinContribution => MIN_CONTRIBUTION_VALUES
+                .iter()
+                .map(|v| v.to_string())
+                .collect(),
+            Knob::LightSamples => LIGHT_SAMPLE_VALUES.iter().map(|v| v.to_string()).collect(),
+            Knob::RussianRoulette => RR_VALUES.iter().map(|&v| rr_name(v)).collect(),
+            Knob::Bvh => BVH_VALUES
+                .iter()
+                .map(|&v| bvh_name(v).to_string())
+                .collect(),
+            Knob::Transport => TRANSPORT_VALUES
+                .iter()
+                .map(|v| v.name().to_string())
+                .collect(),
+        }
+    }
+
+    /// Sets this knob in `c` to its `i`-th value.
+    fn apply(self, i: usize, c: &mut Config) {
+        let s = &mut c.settings;
+        match self {
+            Knob::Spp => s.spp = SPP_VALUES[i],
+            Knob::MaxDepth => s.max_depth = DEPTH_VALUES[i],
+            Knob::MinContribution => s.min_contribution = MIN_CONTRIBUTION_VALUES[i],
+            Knob::LightSamples => s.light_samples = LIGHT_SAMPLE_VALUES[i],
+            Knob::RussianRoulette => s.rr_start_depth = RR_VALUES[i],
+            Knob::Bvh => c.bvh = BVH_VALUES[i],
+            Knob::Transport => s.transport = TRANSPORT_VALUES[i],
+        }
+    }
+
+    /// This knob's value in `c`, as text.
+    pub fn value_of(self, c: &Config) -> String {
+        let s = &c.settings;
+        match self {
+            Knob::Spp => s.spp.to_string(),
+            Knob::MaxDepth => s.max_depth.to_string(),
+            Knob::MinContribution => s.min_contribution.to_string(),
+            Knob::LightSamples => s.light_samples.to_string(),
+            Knob::RussianRoulette => rr_name(s.rr_start_depth),
+            Knob::Bvh => bvh_name(c.bvh).to_string(),
+            Knob::Transport => s.transport.name().to_string(),
+        }
+    }
+
+    /// The knob called `name`.
+    pub fn from_name(name: &str) -> Option<Knob> {
+        Knob::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// The renders of a sweep: the base first, then each knob's values that
+/// differ from the base, one knob at a time.
+pub fn plan(base: &Config, knobs: &[Knob]) -> Vec<Planned> {
+    let mut out = vec![Planned {
+        knob: "base",
+        value: String::new(),
+        config: base.clone(),
+    }];
+    for &knob in knobs {
+        for (i, value) in knob.values().into_iter().enumerate() {
+            let mut config = base.clone();
+            knob.apply(i, &mut config);
+            if config != *base {
+                out.push(Planned {
+                    knob: knob.name(),
+                    value,
+                    config,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// One finished render.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// What was rendered.
+    pub planned: Planned,
+    /// Median render seconds (tracing only, not loading or BVH builds).
+    pub seconds: f64,
+    /// Rays traced.
+    pub rays: u64,
+    /// Error against the reference.
+    pub metrics: Metrics,
+}
+
+/// The CSV header.
+pub const CSV_HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip";
+
+fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
+    let mut s = String::from(CSV_HEADER);
+    s.push('\n');
+    for r in rows {
+        let c = &r.planned.config.settings;
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            r.planned.knob,
+            r.planned.value,
+            c.transport.name(),
+            c.spp,
+            c.max_depth,
+            c.min_contribution,
+            c.light_samples,
+            rr_name(c.rr_start_depth),
+            bvh_name(r.planned.config.bvh),
+            integrator.name(),
+            r.seconds,
+            r.rays,
+            r.metrics.rmse,
+            r.metrics.rel_mse,
+            r.metrics.flip,
+        );
+    }
+    s
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let err = |message: String| Error::Output {
+        path: path.to_path_buf(),
+        message,
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".prism-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| err(format!("cannot create a file in {}: {e}", dir.display())))?;
+    std::io::Write::write_all(&mut tmp, bytes).map_err(|e| err(e.to_string()))?;
+    tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
+    prism::image::output::persist_readable(tmp, path).map_err(err)
+}
+
+/// Renders `config` `runs` times; returns the image, the median seconds
+/// and the rays.
+fn render(
+    desc: &SceneDesc,
+    config: &Config,
+    integrator: IntegratorKind,
+    runs: usize,
+    bar: &Option<ProgressBar>,
+) -> Result<(Film, f64, u64)> {
+    let mut times = Vec::with_capacity(runs);
+    let mut result = None;
+    for _ in 0..runs {
+        let spp = config.settings.spp as u64;
+        let progress: Option<systems::ProgressFn> = bar.clone().map(|b| {
+            let f: systems::ProgressFn = Arc::new(move |rows| b.inc(rows * spp));
+            f
+        });
+        let frame = systems::render_scene_desc(
+            desc.clone(),
+            RenderConfig {
+                settings: config.settings.clone(),
+                integrator,
+                bvh_quality: config.bvh,
+                progress,
+                ..Default::default()
+            },
+            0,
+        )?;
+        times.push(frame.render_seconds);
+        if result.is_none() {
+            let film = frame
+                .film
+                .ok_or_else(|| Error::Invalid("the renderer produced no image".into()))?;
+            result = Some((film, frame.counters.rays.total()));
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let (film, rays) = result.ok_or_else(|| Error::Invalid("--runs must be at least 1".into()))?;
+    Ok((film, times[times.len() / 2], rays))
+}
+
+/// Runs the sweep and writes the CSV and plots.
+pub fn run(args: TradeoffArgs) -> Result<()> {
+    let wall = Instant::now();
+    if args.runs == 0 {
+        return Err(Error::Invalid("--runs must be at least 1".into()));
+    }
+    if args.reference_spp == 0 {
+        return Err(Error::Invalid("--reference-spp must be at least 1".into()));
+    }
+    let (pool, _threads) = crate::thread_pool(args.threads)?;
+    pool.install(|| run_in_pool(&args, wall))
+}
+
+fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
+    let integrator: IntegratorKind = args.integrator.into();
+    let knobs: Vec<Knob> = if args.knobs.is_empty() {
+        Knob::ALL.to_vec()
+    } else {
+        let mut k: Vec<Knob> = Vec::new();
+        for &x in &args.knobs {
+            if !k.contains(&x) {
+                k.push(x);
+            }
+        }
+        k
+    };
+    let base_desc = prism::io::load(&args.scene, BuildQuality::Medium)?;
+    if base_desc.cameras.is_empty() {
+        return Err(Error::load(&args.scene, "the scene has no camera"));
+    }
+    let mut settings = SettingsDesc {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        min_contribution: args.min_contribution,
+        seed: args.seed,
+        exposure: None,
+        transport: Some(Transport::Path),
+        light_samples: args.light_samples,
+        rr_start_depth: args.rr_depth.map(Some),
+    }
+    .resolve(&base_desc.settings);
+    if settings.rr_start_depth.is_none() {
+        // A scene that turns roulette off still gets the usual base.
+        settings.rr_start_depth = Some(prism::integrators::DEFAULT_RR_START_DEPTH);
+    }
+    let invalid = |what: &str, e: String| {
+        Error::Invalid(format!(
+            "{}: invalid {what} settings (from the command line or the scene's [settings]): {e}",
+            args.scene.display()
+        ))
+    };
+    settings.validate().map_err(|e| invalid("base", e))?;
+    let base = Config {
+        settings,
+        bvh: BuildQuality::Medium,
+    };
+    let reference_config = Config {
+        settings: RenderSettings {
+            spp: args.reference_spp,
+            max_depth: args.reference_max_depth,
+            min_contribution: 0.0,
+            seed: args
+                .reference_seed
+                .unwrap_or(base.settings.seed.wrapping_add(1)),
+            ..base.settings.clone()
+        },
+        bvh: BuildQuality::Medium,
+    };
+    reference_config
+        .settings
+        .validate()
+        .map_err(|e| invalid("reference", e))?;
+    let planned = plan(&base, &knobs);
+
+    // Check everything that can be checked before the long part.
+    if args.out.exists() && !args.out.is_dir() {
+        return Err(Error::Output {
+            path: args.out.clone(),
+            message: "exists and is not a folder".into(),
+        });
+    }
+    let given_reference = match &args.reference {
+        Some(path) => {
+            let film = metrics::read_exr(path)?;
+            let (w, h) = (base.settings.width, base.settings.height);
+            if (film.width, film.height) != (w, h) {
+                return Err(Error::Invalid(format!(
+                    "{}: the reference is {}x{} but the base renders {w}x{h}; \
+                     pass --width {} --height {}",
+                    path.display(),
+                    film.width,
+                    film.height,
+                    film.width,
+                    film.height
+                )));
+            }
+            Some(film)
+        }
+        None => None,
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::Output {
+        path: args.out.clone(),
+        message: e.to_string(),
+    })?;
+    let font = plot::load_font(args.font.as_deref());
+    if let Err(e) = &font
+        && !args.quiet
+    {
+        eprintln!("warning: {e}; the plot will have no labels");
+    }
+
+    // Progress in sample-rows: each render adds height x spp per run.
+    let work = |c: &Config| c.settings.height as u64 * c.settings.spp as u64 * args.runs as u64;
+    let mut total: u64 = planned.iter().map(|p| work(&p.config)).sum();
+    if given_reference.is_none() {
+        total += reference_config.settings.height as u64 * reference_config.settings.spp as u64;
+    }
+    let bar = crate::progress_bar(
+        total,
+        args.quiet,
+        "{spinner} tradeoff [{bar:30}] {percent}% {elapsed_precise} (eta {eta}) {msg}",
+    );
+
+    let reference = match given_reference {
+        Some(f) => f,
+        None => {
+            if let Some(b) = &bar {
+                b.set_message(format!("reference, {} spp", args.reference_spp));
+            }
+            let (film, seconds, _) = render(&base_desc, &reference_config, integrator, 1, &bar)?;
+            let path = args.out.join("reference.exr");
+            prism::image::output::write_image(&path, &film, &PngOptions::default())?;
+            if let Some(b) = &bar {
+                // Shown on any stderr, not only on a terminal like the bar.
+                b.suspend(|| {
+                    eprintln!(
+                        "reference: {} spp in {seconds:.2} s -> {}",
+                        args.reference_spp,
+                        path.display()
+                    )
+                });
+            }
+            film
+        }
+    };
+
+    let display = PngOptions::default();
+    let mut rows = Vec::with_capacity(planned.len());
+    let mut loaded: Option<(BuildQuality, SceneDesc)> = None;
+    for p in planned {
+        if let Some(b) = &bar {
+            b.set_message(format!("{} {}", p.knob, p.value));
+        }
+        let desc = if p.config.bvh == BuildQuality::Medium {
+            &base_desc
+        } else {
+            if loaded.as_ref().map(|(q, _)| *q) != Some(p.config.bvh) {
+                loaded = Some((p.config.bvh, prism::io::load(&args.scene, p.config.bvh)?));
+            }
+            &loaded.as_ref().expect("just loaded").1
+        };
+        let (film, seconds, rays) = render(desc, &p.config, integrator, args.runs, &bar)?;
+        let metrics = metrics::compare(&film, &reference, &display)?;
+        rows.push(Row {
+            planned: p,
+            seconds,
+            rays,
+            metrics,
+        });
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+
+    let csv_path = args.out.join("tradeoff.csv");
+    write_atomic(&csv_path, csv(&rows, integrator).as_bytes())?;
+    let title = format!(
+        "{}: error against time, {}x{}",
+        args.scene.file_name().map_or_else(
+            || args.scene.display().to_string(),
+            |n| n.to_string_lossy().into()
+        ),
+        base.settings.width,
+        base.settings.height
+    );
+    let font_ok = font.is_ok();
+    let skipped = plot::write_plots(&args.out, &rows, &title, font_ok)?;
+    if !args.quiet {
+        if skipped > 0 {
+            eprintln!(
+                "warning: {skipped} render(s) with zero relMSE cannot be shown on the log scale"
+            );
+        }
+        print_table(&rows);
+        eprintln!(
+            "{} renders in {:.1} s total -> {}, tradeoff.png, tradeoff.svg",
+            rows.len() + usize::from(args.reference.is_none()),
+            wall.elapsed().as_secs_f64(),
+            csv_path.display()
+        );
+    }
+    Ok(())
+}
+
+fn print_table(rows: &[Row]) {
+    let front = plot::pareto_front(rows);
+    println!(
+        "{:<17} {:>10} {:>10} {:>12} {:>12} {:>12} {:>9}",
+        "knob", "value", "seconds", "rays", "rmse", "rel_mse", "flip"
+    );
+    for (i, r) in rows.iter().enumerate() {
+        println!(
+            "{:<17} {:>10} {:>10.3} {:>12} {:>12.4e} {:>12.4e} {:>9.5}{}",
+            r.planned.knob,
+            r.planned.value,
+            r.seconds,
+            r.rays,
+            r.metrics.rmse,
+            r.metrics.rel_mse,
+            r.metrics.flip,
+            if front.contains(&i) { "  pareto" } else { "" }
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_plan_varies_one_knob_at_a_time() {
+        let base = Config {
+            settings: RenderSettings {
+                spp: 16,
+                max_depth: 8,
+                transport: Transport::Path,
+                rr_start_depth: Some(3),
+                ..Default::default()
+            },
+            bvh: BuildQuality::Medium,
+        };
+        let p = plan(&base, &Knob::ALL);
+        assert_eq!(p[0].knob, "base");
+        // Every value but the base's, for each knob.
+        let count = |k: &str| p.iter().filter(|x| x.knob == k).count();
+        assert_eq!(count("spp"), SPP_VALUES.len() - 1);
+        assert_eq!(count("max-depth"), DEPTH_VALUES.len() - 1);
+        assert_eq!(count("min-contribution"), MIN_CONTRIBUTION_VALUES.len() - 1);
+        assert_eq!(count("light-samples"), LIGHT_SAMPLE_VALUES.len() - 1);
+        assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
+        assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
+        assert_eq!(count("transport"), 1);
+        for x in &p[1..] {
+            let mut c = x.config.clone();
+            // Undo the one knob: the rest must be the base.
+            match x.knob {
+                "spp" => c.settings.spp = base.settings.spp,
+                "max-depth" => c.settings.max_depth = base.settings.max_depth,
+                "min-contribution" => c.settings.min_contribution = base.settings.min_contribution,
+                "light-samples" => c.settings.light_samples = base.settings.light_samples,
+                "russian-roulette" => c.settings.rr_start_depth = base.settings.rr_start_depth,
+                "bvh" => c.bvh = base.bvh,
+                "transport" => c.settings.transport = base.settings.transport,
+                k => panic!("unexpected knob {k}"),
+            }
+            assert_eq!(c, base, "{} {}", x.knob, x.value);
+            assert_ne!(x.config, base);
+        }
+    }
+}

@@ -1,0 +1,6 @@
+//! Layer 1: images. The film and its pixel accumulator, PNG and EXR
+//! output written atomically, and error metrics between images.
+
+pub mod film;
+pub mod metrics;
+pub mod output;

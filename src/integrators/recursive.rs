@@ -1,0 +1,173 @@
+//! The recursive tracer: depth-first, one ray at a time. Whitted
+//! transport recurses into each specular ray; path transport follows one
+//! ray per bounce in a loop.
+
+use rayon::prelude::*;
+
+use super::{Progress, RenderSettings, Transport, accumulate, camera_rays, film_sample};
+use crate::core::math::{Color, Ray, max_component};
+use crate::core::rng::Sampler;
+use crate::image::film::Film;
+use crate::integrators::counters::RenderCounters;
+use crate::scene::RenderScene;
+use crate::scene::camera::{Camera, CameraRays};
+use crate::transport::interaction::{Interaction, RayKind, direct_light, scatter};
+use crate::transport::path::{self, LobeChoice};
+
+/// Radiance arriving along `ray`; `depth` is the number of bounces so far
+/// and `throughput` the weight this radiance will be multiplied by on its
+/// way to the camera (used for the contribution threshold).
+pub fn trace(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    ray: &Ray,
+    depth: u32,
+    throughput: Color,
+    counters: &mut RenderCounters,
+) -> Color {
+    let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
+        return scene.background;
+    };
+    let it = Interaction::new(scene, ray, &hit);
+    let mut radiance = it.surface.emission;
+    if it.is_lit_by_lights() {
+        for light in &scene.lights {
+            if let Some(q) = direct_light(&it, light) {
+                counters.rays.shadow += 1;
+                if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                    radiance += q.radiance;
+                }
+            }
+        }
+    }
+    if depth < settings.max_depth {
+        for s in scatter(&it).into_iter().flatten() {
+            let t = throughput * s.weight;
+            if max_component(t) < settings.min_contribution {
+                continue;
+            }
+            match s.kind {
+                RayKind::Reflection => counters.rays.reflection += 1,
+                RayKind::Refraction => counters.rays.refraction += 1,
+                RayKind::Camera => counters.rays.camera += 1,
+            }
+            radiance += s.weight * trace(scene, settings, &s.ray, depth + 1, t, counters);
+        }
+    }
+    radiance
+}
+
+/// Radiance along a camera ray by path tracing: a loop, one vertex per
+/// bounce, with next-event estimation at every vertex and multiple
+/// importance sampling of emission found by scattered rays.
+pub fn trace_path(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    sampler: &mut Sampler,
+    counters: &mut RenderCounters,
+) -> Color {
+    let mut radiance = Color::ZERO;
+    let mut throughput = Color::ONE;
+    let mut ray = *camera_ray;
+    let mut prev_pdf = 0.0;
+    let mut depth = 0;
+    loop {
+        let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
+            radiance += throughput * scene.background;
+            return radiance;
+        };
+        let it = Interaction::new(scene, &ray, &hit);
+        let distance = hit.t * ray.direction.length();
+        radiance +=
+            throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        let lobes = LobeChoice::new(&it);
+        path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
+            counters.rays.shadow += 1;
+            if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                radiance += throughput * q.radiance;
+            }
+        });
+        let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
+            return radiance;
+        };
+        match c.sample.kind {
+            RayKind::Reflection => counters.rays.reflection += 1,
+            RayKind::Refraction => counters.rays.refraction += 1,
+            RayKind::Camera => counters.rays.camera += 1,
+        }
+        throughput = throughput * c.sample.weight * c.scale;
+        ray = c.sample.ray;
+        prev_pdf = c.sample.pdf;
+        depth += 1;
+    }
+}
+
+/// Radiance of sample `s` of the `spp` samples of pixel `(x, y)`: its
+/// camera ray, traced with the settings' transport. Its random numbers
+/// are keyed by (seed, pixel, sample).
+pub fn pixel_sample(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    (x, y): (u32, u32),
+    (s, spp): (u32, u32),
+    counters: &mut RenderCounters,
+) -> Color {
+    let pixel = y * settings.width + x;
+    let mut sampler = Sampler::new(settings.seed, pixel, s);
+    let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
+    counters.rays.camera += 1;
+    match settings.transport {
+        Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Path => trace_path(scene, settings, &ray, &mut sampler, counters),
+    }
+}
+
+/// Renders every pixel with the recursive tracer, rows in parallel.
+pub fn render(
+    scene: &RenderScene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<Progress<'_>>,
+) -> (Film, RenderCounters) {
+    let mut film = Film::new(settings.width, settings.height);
+    let cam = camera_rays(camera, settings);
+    let width = settings.width as usize;
+    let counters = film
+        .pixels
+        .par_chunks_mut(width)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut counters = RenderCounters::default();
+            for (x, px) in row.iter_mut().enumerate() {
+                let mut sum = Color::ZERO;
+                let mut valid = 0;
+                for s in 0..settings.spp {
+                    let l = pixel_sample(
+                        scene,
+                        settings,
+                        &cam,
+                        (x as u32, y as u32),
+                        (s, settings.spp),
+                        &mut counters,
+                    );
+                    accumulate(&mut sum, &mut valid, l, &mut counters);
+                }
+                *px = if valid > 0 {
+                    sum / valid as f32
+                } else {
+                    Color::ZERO
+                };
+            }
+            if let Some(p) = progress {
+                p(1);
+            }
+            counters
+        })
+        .reduce(RenderCounters::default, |mut a, b| {
+            a.add(&b);
+            a
+        });
+    (film, counters)
+}

@@ -1,0 +1,491 @@
+//! Structure-of-arrays work queues for the wavefront integrator.
+//!
+//! A queue holds one `Vec` per field of its item; it only knows how to
+//! push, read back and clear. Which queue an item goes to is decided by the
+//! integrator's stages, never here. Pushes assert (in debug builds) that no
+//! NaN or infinity enters a queue.
+
+use glam::{Vec2, Vec3A};
+
+use crate::core::math::{Color, Ray};
+use crate::scene::Hit;
+
+/// Memory held by a queue's buffers, in bytes (capacity, not length).
+pub trait QueueBytes {
+    /// Bytes allocated.
+    fn bytes(&self) -> usize;
+}
+
+fn vec_bytes<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
+}
+
+/// The field-by-field methods every structure-of-arrays queue has: length
+/// (of the field `$len`), `clear`, `append` and [`QueueBytes`], over the
+/// listed fields, which must be all of the queue's `Vec`s.
+macro_rules! soa_queue {
+    ($queue:ident, $what:literal, $len:ident, [$($field:ident),+ $(,)?]) => {
+        impl $queue {
+            #[doc = concat!("Number of ", $what, ".")]
+            pub fn len(&self) -> usize {
+                self.$len.len()
+            }
+
+            #[doc = concat!("True when no ", $what, " are queued.")]
+            pub fn is_empty(&self) -> bool {
+                self.$len.is_empty()
+            }
+
+            #[doc = concat!("Removes all ", $what, ", keeping the allocation.")]
+            pub fn clear(&mut self) {
+                $(self.$field.clear();)+
+            }
+
+            #[doc = concat!("Appends all ", $what, " of `other`, in order.")]
+            pub fn append(&mut self, other: &$queue) {
+                $(self.$field.extend_from_slice(&other.$field);)+
+            }
+        }
+
+        impl QueueBytes for $queue {
+            fn bytes(&self) -> usize {
+                0 $(+ vec_bytes(&self.$field))+
+            }
+        }
+    };
+}
+
+/// A ray waiting to be traced, with the path it belongs to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayItem {
+    /// The ray (origin already offset from the surface it leaves).
+    pub ray: Ray,
+    /// Weight of the radiance it brings back, relative to the pixel sample.
+    pub throughput: Color,
+    /// Index of the path (pixel sample) within the batch.
+    pub path: u32,
+    /// Bounces so far (0 for camera rays).
+    pub depth: u32,
+    /// Path tracing: density with which the direction was drawn (zero for
+    /// camera rays and specular lobes, and unused by Whitted transport).
+    pub pdf: f32,
+}
+
+/// Rays to trace, by field.
+#[derive(Clone, Debug, Default)]
+pub struct RayQueue {
+    /// Origins.
+    pub origin: Vec<Vec3A>,
+    /// Directions (unit).
+    pub direction: Vec<Vec3A>,
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices within the batch.
+    pub path: Vec<u32>,
+    /// Bounce depths.
+    pub depth: Vec<u32>,
+    /// Direction densities (path tracing).
+    pub pdf: Vec<f32>,
+}
+
+impl RayQueue {
+    /// Appends a ray.
+    #[inline]
+    pub fn push(&mut self, item: RayItem) {
+        debug_assert!(
+            item.ray.origin.is_finite() && item.ray.direction.is_finite(),
+            "non-finite ray pushed: {item:?}"
+        );
+        debug_assert!(
+            item.throughput.is_finite(),
+            "non-finite throughput: {item:?}"
+        );
+        self.origin.push(item.ray.origin);
+        self.direction.push(item.ray.direction);
+        self.throughput.push(item.throughput);
+        self.path.push(item.path);
+        self.depth.push(item.depth);
+        self.pdf.push(item.pdf);
+    }
+
+    /// The ray at `i`.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray::new(self.origin[i], self.direction[i])
+    }
+
+    /// The item at `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> RayItem {
+        RayItem {
+            ray: self.ray(i),
+            throughput: self.throughput[i],
+            path: self.path[i],
+            depth: self.depth[i],
+            pdf: self.pdf[i],
+        }
+    }
+}
+
+soa_queue!(
+    RayQueue,
+    "rays",
+    path,
+    [origin, direction, throughput, path, depth, pdf]
+);
+
+/// A surface hit waiting to be shaded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HitItem {
+    /// Direction of the ray that found the hit.
+    pub direction: Vec3A,
+    /// World-space hit point.
+    pub point: Vec3A,
+    /// Unit geometric normal (as the geometry defines it).
+    pub geometric_normal: Vec3A,
+    /// Unit shading normal.
+    pub shading_normal: Vec3A,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Material index.
+    pub material: u32,
+    /// Path throughput.
+    pub throughput: Color,
+    /// Path index.
+    pub path: u32,
+    /// Bounce depth of the ray that hit.
+    pub depth: u32,
+    /// Instance hit.
+    pub instance: u32,
+    /// Length of the ray segment to the hit.
+    pub distance: f32,
+    /// Density of the ray's direction (path tracing; see [`RayItem::pdf`]).
+    pub pdf: f32,
+}
+
+impl HitItem {
+    /// Queues `hit`, found by `ray` (whose direction is unit).
+    #[inline]
+    pub fn new(hit: &Hit, ray: &RayItem) -> Self {
+        Self {
+            direction: ray.ray.direction,
+            point: hit.point,
+            geometric_normal: hit.geometric_normal,
+            shading_normal: hit.shading_normal,
+            uv: hit.uv,
+            material: hit.material,
+            throughput: ray.throughput,
+            path: ray.path,
+            depth: ray.depth,
+            instance: hit.instance,
+            distance: hit.t * ray.ray.direction.length(),
+            pdf: ray.pdf,
+        }
+    }
+
+    /// The surface point as a [`Hit`] for shading (`t` is the distance
+    /// along the unit direction).
+    #[inline]
+    pub fn hit(&self) -> Hit {
+        Hit {
+            t: self.distance,
+            point: self.point,
+            geometric_normal: self.geometric_normal,
+            shading_normal: self.shading_normal,
+            uv: self.uv,
+            instance: self.instance,
+            material: self.material,
+        }
+    }
+}
+
+/// Hits of one material class, by field.
+#[derive(Clone, Debug, Default)]
+pub struct HitQueue {
+    /// Ray directions.
+    pub direction: Vec<Vec3A>,
+    /// Hit points.
+    pub point: Vec<Vec3A>,
+    /// Geometric normals.
+    pub geometric_normal: Vec<Vec3A>,
+    /// Shading normals.
+    pub shading_normal: Vec<Vec3A>,
+    /// Texture coordinates.
+    pub uv: Vec<Vec2>,
+    /// Material indices.
+    pub material: Vec<u32>,
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+    /// Instances hit.
+    pub instance: Vec<u32>,
+    /// Segment lengths.
+    pub distance: Vec<f32>,
+    /// Direction densities.
+    pub pdf: Vec<f32>,
+    /// Bounce depths.
+    pub depth: Vec<u32>,
+}
+
+impl HitQueue {
+    /// Appends a hit.
+    #[inline]
+    pub fn push(&mut self, item: HitItem) {
+        debug_assert!(
+            item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
+            "non-finite hit pushed: {item:?}"
+        );
+        self.direction.push(item.direction);
+        self.point.push(item.point);
+        self.geometric_normal.push(item.geometric_normal);
+        self.shading_normal.push(item.shading_normal);
+        self.uv.push(item.uv);
+        self.material.push(item.material);
+        self.throughput.push(item.throughput);
+        self.path.push(item.path);
+        self.depth.push(item.depth);
+        self.instance.push(item.instance);
+        self.distance.push(item.distance);
+        self.pdf.push(item.pdf);
+    }
+
+    /// The hit at `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> HitItem {
+        HitItem {
+            direction: self.direction[i],
+            point: self.point[i],
+            geometric_normal: self.geometric_normal[i],
+            shading_normal: self.shading_normal[i],
+            uv: self.uv[i],
+            material: self.material[i],
+            throughput: self.throughput[i],
+            path: self.path[i],
+            depth: self.depth[i],
+            instance: self.instance[i],
+            distance: self.distance[i],
+            pdf: self.pdf[i],
+        }
+    }
+}
+
+soa_queue!(
+    HitQueue,
+    "hits",
+    path,
+    [
+        direction,
+        point,
+        geometric_normal,
+        shading_normal,
+        uv,
+        material,
+        throughput,
+        path,
+        instance,
+        distance,
+        pdf,
+        depth
+    ]
+);
+
+/// Rays that left the scene: they bring back the background.
+#[derive(Clone, Debug, Default)]
+pub struct EscapedQueue {
+    /// Path throughputs.
+    pub throughput: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+}
+
+impl EscapedQueue {
+    /// Appends an escaped ray.
+    #[inline]
+    pub fn push(&mut self, path: u32, throughput: Color) {
+        debug_assert!(throughput.is_finite());
+        self.throughput.push(throughput);
+        self.path.push(path);
+    }
+}
+
+soa_queue!(EscapedQueue, "escaped rays", path, [throughput, path]);
+
+/// A shadow ray and what it adds to its path if nothing blocks it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowItem {
+    /// The ray towards the light.
+    pub ray: Ray,
+    /// Far end of the segment (the light's distance, or infinity).
+    pub t_max: f32,
+    /// Radiance added to the path if visible, throughput included.
+    pub radiance: Color,
+    /// Path index.
+    pub path: u32,
+}
+
+/// Shadow rays, by field.
+#[derive(Clone, Debug, Default)]
+pub struct ShadowQueue {
+    /// Origins.
+    pub origin: Vec<Vec3A>,
+    /// Directions.
+    pub direction: Vec<Vec3A>,
+    /// Segment ends.
+    pub t_max: Vec<f32>,
+    /// Radiance if unoccluded.
+    pub radiance: Vec<Color>,
+    /// Path indices.
+    pub path: Vec<u32>,
+}
+
+impl ShadowQueue {
+    /// Appends a shadow ray.
+    #[inline]
+    pub fn push(&mut self, item: ShadowItem) {
+        debug_assert!(
+            item.ray.origin.is_finite() && item.ray.direction.is_finite(),
+            "non-finite shadow ray: {item:?}"
+        );
+        debug_assert!(!item.t_max.is_nan(), "NaN shadow extent: {item:?}");
+        self.origin.push(item.ray.origin);
+        self.direction.push(item.ray.direction);
+        self.t_max.push(item.t_max);
+        self.radiance.push(item.radiance);
+        self.path.push(item.path);
+    }
+
+    /// The ray at `i`.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray::new(self.origin[i], self.direction[i])
+    }
+}
+
+soa_queue!(
+    ShadowQueue,
+    "shadow rays",
+    path,
+    [origin, direction, t_max, radiance, path]
+);
+
+/// Shadow rays kept as the per-chunk segments that produced them, in
+/// chunk order: a shading chunk hands its whole buffer over
+/// ([`ShadowSegments::take`]) instead of copying it into one long queue,
+/// and gets an empty, already allocated buffer back. Tracing reads the
+/// segments in order, so results do not depend on the thread count.
+#[derive(Clone, Debug, Default)]
+pub struct ShadowSegments {
+    segments: Vec<ShadowQueue>,
+    used: usize,
+}
+
+impl ShadowSegments {
+    /// Appends the rays of `q` as the next segment, leaving in `q` an
+    /// empty buffer (one of this queue's spares) for reuse.
+    pub fn take(&mut self, q: &mut ShadowQueue) {
+        if q.is_empty() {
+            return;
+        }
+        if self.used == self.segments.len() {
+            self.segments.push(ShadowQueue::default());
+        }
+        std::mem::swap(&mut self.segments[self.used], q);
+        self.used += 1;
+    }
+
+    /// Appends a copy of every shadow ray of `q`, in order.
+    pub fn append(&mut self, q: &ShadowQueue) {
+        if q.is_empty() {
+            return;
+        }
+        if self.used == self.segments.len() {
+            self.segments.push(ShadowQueue::default());
+        }
+        self.segments[self.used].append(q);
+        self.used += 1;
+    }
+
+    /// The segments in order.
+    pub fn segments(&self) -> &[ShadowQueue] {
+        &self.segments[..self.used]
+    }
+
+    /// Total number of shadow rays.
+    pub fn len(&self) -> usize {
+        self.segments().iter().map(|s| s.len()).sum()
+    }
+
+    /// True when no shadow ray is queued.
+    pub fn is_empty(&self) -> bool {
+        self.used == 0
+    }
+
+    /// Removes every ray, keeping the buffers.
+    pub fn clear(&mut self) {
+        for s in &mut self.segments[..self.used] {
+            s.clear();
+        }
+        self.used = 0;
+    }
+}
+
+impl QueueBytes for ShadowSegments {
+    fn bytes(&self) -> usize {
+        self.segments.iter().map(|s| s.bytes()).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn queues_round_trip_and_clear() {
+        let mut q = RayQueue::default();
+        let item = RayItem {
+            ray: Ray::new(Vec3A::new(1.0, 2.0, 3.0), Vec3A::X),
+            throughput: Color::new(0.5, 0.25, 1.0),
+            path: 7,
+            depth: 2,
+            pdf: 0.25,
+        };
+        q.push(item);
+        q.push(RayItem { path: 8, ..item });
+        assert_eq!(q.len(), 2);
+        assert_eq!(q.get(0), item);
+        assert_eq!(q.get(1).path, 8);
+        let bytes = q.bytes();
+        assert!(bytes >= 2 * (16 + 16 + 12 + 4 + 4 + 4));
+        q.clear();
+        assert!(q.is_empty());
+        assert_eq!(q.bytes(), bytes, "clearing keeps the allocation");
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "non-finite")]
+    fn nan_cannot_enter_a_ray_queue() {
+        let mut q = RayQueue::default();
+        q.push(RayItem {
+            ray: Ray::new(Vec3A::new(f32::NAN, 0.0, 0.0), Vec3A::X),
+            throughput: Color::ONE,
+            path: 0,
+            depth: 0,
+            pdf: 0.0,
+        });
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "non-finite")]
+    fn nan_cannot_enter_a_shadow_queue() {
+        let mut q = ShadowQueue::default();
+        q.push(ShadowItem {
+            ray: Ray::new(Vec3A::ZERO, Vec3A::new(0.0, f32::INFINITY, 0.0)),
+            t_max: 1.0,
+            radiance: Color::ONE,
+            path: 0,
+        });
+    }
+}

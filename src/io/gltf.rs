@@ -1,0 +1,2089 @@
+//! glTF 2.0 loader: `.gltf` (JSON with external or embedded buffers) and
+//! `.glb` (binary container) files become a [`SceneDesc`].
+//!
+//! # What is read
+//!
+//! * **Scene graph.** The default scene (or the first scene, or, when the
+//!   file has no scenes, every node that is nobody's child) is walked depth
+//!   first and node transforms are composed into world transforms. A cycle
+//!   anywhere in the node hierarchy, a hierarchy deeper than
+//!   1024 levels, or a non-finite transform is an error naming the node.
+//!   Nodes whose world transform is not invertible (for example scaled to
+//!   zero, a common way to hide objects) are skipped with a warning.
+//! * **Meshes.** Every triangle primitive becomes one [`Mesh`], built once
+//!   and shared ([`Arc`]) between the nodes that instance it. `POSITION`,
+//!   `NORMAL` (vertex normals give smooth shading, their absence flat
+//!   shading), `TEXCOORD_0` and the indices are read, including sparse and
+//!   quantized (normalized integer) accessors. Triangle strips and fans
+//!   are converted to triangle lists; point and line primitives are
+//!   skipped with one warning per file.
+//! * **Materials.** The metallic-roughness model is mapped through
+//!   [`Material::from_metallic_roughness`]: base colour factor and texture,
+//!   metallic and roughness factors and texture (roughness in G, metallic
+//!   in B), emissive factor and texture scaled by
+//!   `KHR_materials_emissive_strength`, `KHR_materials_transmission`
+//!   (factor), `KHR_materials_ior`, and `KHR_materials_specular` (factor
+//!   and colour: the dielectric F0 is `((ior-1)/(ior+1))^2 * specularFactor *
+//!   specularColorFactor`, 0.04 for the default ior of 1.5, so a factor of
+//!   0 leaves a Lambertian surface).
+//!   Primitives without a material get the glTF default material (white,
+//!   metallic 1, roughness 1). `KHR_texture_transform` is honoured.
+//! * **Textures.** PNG and JPEG images (external files, data URIs or
+//!   buffer views) are decoded once per image into linear RGB
+//!   [`ImageTexture`]s; colour textures (base colour, emissive) are
+//!   converted from sRGB, data textures (metallic-roughness) are not.
+//!   8- and 16-bit grey, grey-alpha, RGB and RGBA images are accepted,
+//!   float images are taken as linear; alpha is dropped.
+//! * **Lights** (`KHR_lights_punctual`): point and spot lights become
+//!   [`Light::Point`] / [`Light::Spot`] with intensity `color * intensity`
+//!   in candela, directional lights [`Light::Directional`] with illuminance
+//!   `color * intensity` in lux, placed by the node's world transform
+//!   (position = origin, direction = local `-Z`). Negative or non-finite
+//!   values are errors.
+//! * **Cameras.** Perspective cameras become [`Camera`]s looking along the
+//!   node's local `-Z` with `+Y` up and the file's vertical field of view,
+//!   in traversal order. The aspect ratio and clipping planes are ignored
+//!   (the image size decides the aspect ratio).
+//!
+//! # Units
+//!
+//! glTF's units pass through unchanged: metres for geometry, candela and
+//! lux for lights. Emission (`emissiveFactor * emissiveStrength` times the
+//! emissive texture) is used directly as emitted radiance.
+//!
+//! # What is ignored
+//!
+//! Normal, occlusion, transmission, specular and other extension textures;
+//! alpha modes and alpha (everything is opaque); `doubleSided` (nothing is
+//! culled, so winding and negative-determinant transforms do not matter);
+//! `KHR_materials_volume` (thickness and attenuation); texture sampler
+//! settings (lookups are always bilinear with repeat wrapping);
+//! texture coordinate sets other than 0 (set 0 is used, with a warning);
+//! light `range` (lights fall off with the inverse square law forever);
+//! orthographic cameras (the renderer is pinhole only; skipped with a
+//! warning); animations, skins (skinned meshes render in their bind pose
+//! with the node's transform), morph targets (the base geometry is used)
+//! and `EXT_mesh_gpu_instancing` (the node is drawn once, with its own
+//! transform).
+//!
+//! # Errors
+//!
+//! Every problem is reported as [`Error::Load`] for the glTF file with a
+//! message saying what is wrong: unreadable or malformed files, missing or
+//! short buffers, missing or undecodable images, accessors that read
+//! outside their buffers, out-of-range vertex indices, invalid numbers
+//! (non-finite transforms, factors or light values; negative colours,
+//! factors or intensities; vertex positions farther than 10^12 from the
+//! origin in object or world space, which would overflow BVH costs).
+//! The loader never panics on malformed input: it does its own buffer,
+//! image and accessor decoding with bounds checks instead of relying on
+//! the `gltf` crate's importer.
+
+use std::collections::{HashMap, HashSet};
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{Affine3A, Mat4, Quat, Vec2, Vec3, Vec3A};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::{Mode, Semantic};
+
+use crate::core::error::Error;
+use crate::core::math::Color;
+use crate::geometry::mesh::{BuildQuality, MAX_COORDINATE, Mesh, MeshData, NormalMode};
+use crate::geometry::transform::Transform;
+use crate::image::output::srgb_to_linear;
+use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc};
+use crate::scene::camera::Camera;
+use crate::scene::light::Light;
+use crate::scene::material::{ImageTexture, Material, Texture, UvTransform};
+
+/// Deepest node hierarchy accepted.
+const MAX_DEPTH: usize = 1024;
+/// Most node visits in one traversal (guards against node DAGs whose
+/// expansion into a tree is exponentially large).
+const MAX_NODE_VISITS: usize = 1 << 22;
+/// Most elements of a sparse accessor without a base buffer view (its
+/// size is not bounded by the file's size).
+const MAX_SPARSE_ELEMENTS: usize = 1 << 27;
+
+/// Loads a glTF 2.0 file (`.gltf` or `.glb`) into a [`SceneDesc`].
+///
+/// Meshes are built with the given BVH `quality`. The background stays
+/// black and no render settings are suggested. Warnings about ignored
+/// content (line primitives, orthographic cameras, ...) are printed to
+/// standard error once each. See the [module documentation](self) for
+/// what is read and how it maps onto Prism's types.
+///
+/// # Errors
+///
+/// [`Error::Load`] naming `path` and what is wrong with the file or with
+/// a file it references.
+pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc> {
+    let bytes = crate::io::read_regular_file(path)
+        .map_err(|e| Error::load(path, format!("cannot read file: {e}")))?;
+    load_gltf_bytes(&bytes, path, quality)
+}
+
+/// Loads a glTF 2.0 document (`.gltf` JSON or `.glb` binary, told apart by
+/// the GLB magic) from memory. `path` names the file in messages, and its
+/// folder is where external buffers and images are looked up; it is not
+/// read itself. This is the entry point of the glTF fuzz target (`fuzz/`).
+pub fn load_gltf_bytes(
+    bytes: &[u8],
+    path: &Path,
+    quality: BuildQuality,
+) -> crate::Result<SceneDesc> {
+    let mut state = State::default();
+    let result = open(bytes, path).and_then(|ctx| build_scene(&ctx, &mut state, quality));
+    state.print_warnings(path);
+    result.map_err(|message| Error::load(path, message))
+}
+
+/// The parsed, validated document and its buffers.
+struct Ctx {
+    document: gltf::Document,
+    buffers: Vec<Vec<u8>>,
+    base: PathBuf,
+}
+
+/// Caches and warnings accumulated while building the scene.
+#[derive(Default)]
+struct State {
+    quality: BuildQuality,
+    meshes: HashMap<(usize, usize), Option<Arc<Mesh>>>,
+    materials: HashMap<Option<usize>, Material>,
+    decoded: HashMap<usize, image::DynamicImage>,
+    textures: HashMap<(usize, bool), Arc<ImageTexture>>,
+    warnings: Vec<String>,
+    warned: HashSet<String>,
+    skipped_primitives: usize,
+}
+
+impl State {
+    fn warn(&mut self, message: String) {
+        if self.warned.insert(message.clone()) {
+            self.warnings.push(message);
+        }
+    }
+
+    fn print_warnings(&mut self, path: &Path) {
+        if self.skipped_primitives > 0 {
+            let n = self.skipped_primitives;
+            self.warn(format!(
+                "skipped {n} point/line primitive{}: only triangles are rendered",
+                if n == 1 { "" } else { "s" }
+            ));
+        }
+        for w in &self.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Reading the file
+// ---------------------------------------------------------------------------
+
+/// Parses and validates the document and loads its buffers.
+fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
+    let is_glb = bytes.starts_with(b"glTF");
+    if is_glb {
+        check_glb_header(bytes)?;
+    }
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| match e {
+            gltf::Error::Deserialize(e) => format!("cannot parse glTF JSON: {e}"),
+            gltf::Error::Binary(e) => format!("invalid GLB container: {e}"),
+            e => format!("cannot parse glTF: {e}"),
+        })?;
+    let json = document.into_json();
+    precheck_json(&json)?;
+    let document = gltf::Document::from_json(json).map_err(|e| match e {
+        gltf::Error::Validation(errors) => {
+            let list: Vec<String> = errors
+                .iter()
+                .take(10)
+                .map(|(path, error)| format!("{path}: {error}"))
+                .collect();
+            let more = errors.len().saturating_sub(list.len());
+            let more = if more > 0 {
+                format!(" (and {more} more)")
+            } else {
+                String::new()
+            };
+            format!("invalid glTF: {}{more}", list.join("; "))
+        }
+        e => format!("invalid glTF: {e}"),
+    })?;
+    let base = path
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let buffers = load_buffers(&document, &base, blob)?;
+    Ok(Ctx {
+        document,
+        buffers,
+        base,
+    })
+}
+
+/// Checks the 12-byte GLB header before the `gltf` crate reads it (it
+/// trusts the declared length).
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    let word = |i: usize| {
+        bytes
+            .get(i..i + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let (Some(version), Some(length)) = (word(4), word(8)) else {
+        return Err(format!(
+            "truncated GLB: the file has {} bytes, less than the 12-byte header",
+            bytes.len()
+        ));
+    };
+    if version != 2 {
+        return Err(format!("unsupported GLB version {version} (expected 2)"));
+    }
+    if length < 12 {
+        return Err(format!(
+            "invalid GLB header: declared length {length} is shorter than the header"
+        ));
+    }
+    if length as usize > bytes.len() {
+        return Err(format!(
+            "truncated GLB: the header declares {length} bytes but the file has {}",
+            bytes.len()
+        ));
+    }
+    Ok(())
+}
+
+/// Checks what the `gltf` crate's validation indexes without a bounds
+/// check (attribute accessors of primitives).
+fn precheck_json(json: &gltf::json::Root) -> Result<(), String> {
+    for (mi, mesh) in json.meshes.iter().enumerate() {
+        for (pi, primitive) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &primitive.attributes {
+                if index.value() >= json.accessors.len() {
+                    return Err(format!(
+                        "invalid glTF: meshes[{mi}].primitives[{pi}] attribute {} refers to \
+                         accessor {} but the file has {} accessors",
+                        semantic.to_string(),
+                        index.value(),
+                        json.accessors.len()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A short description of a URI for messages (data URIs are not quoted).
+fn uri_label(uri: &str) -> String {
+    if uri.starts_with("data:") {
+        "<data URI>".to_string()
+    } else {
+        uri.to_string()
+    }
+}
+
+/// Loads every buffer of the document.
+fn load_buffers(
+    document: &gltf::Document,
+    base: &Path,
+    mut blob: Option<Vec<u8>>,
+) -> Result<Vec<Vec<u8>>, String> {
+    let mut buffers = Vec::new();
+    for buffer in document.buffers() {
+        let i = buffer.index();
+        let (data, label) = match buffer.source() {
+            gltf::buffer::Source::Bin => (
+                blob.take().ok_or_else(|| {
+                    format!("buffer {i} refers to the GLB binary chunk, but there is none")
+                })?,
+                format!("buffer {i} (GLB binary chunk)"),
+            ),
+            gltf::buffer::Source::Uri(uri) => (
+                read_uri(base, uri)
+                    .map_err(|e| format!("cannot read buffer '{}': {e}", uri_label(uri)))?,
+                format!("buffer '{}'", uri_label(uri)),
+            ),
+        };
+        if data.len() < buffer.length() {
+            return Err(format!(
+                "{label} has {} bytes but the file declares {}",
+                data.len(),
+                buffer.length()
+            ));
+        }
+        buffers.push(data);
+    }
+    Ok(buffers)
+}
+
+/// True when `uri` starts with a URI scheme (`name:`), as opposed to a
+/// relative path.
+fn has_scheme(uri: &str) -> bool {
+    match uri.split_once(':') {
+        Some((scheme, _)) => {
+            scheme.len() > 1
+                && scheme.starts_with(|c: char| c.is_ascii_alphabetic())
+                && scheme
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.'))
+        }
+        None => false,
+    }
+}
+
+/// Reads the bytes a buffer or image URI refers to: a data URI, a
+/// `file:` URI or a path relative to the glTF file.
+fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, String> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (meta, data) = rest
+            .split_once(',')
+            .ok_or("malformed data URI (no comma)")?;
+        return if meta.ends_with(";base64") {
+            base64_decode(data)
+        } else {
+            percent_decode(data)
+        };
+    }
+    let file = if let Some(rest) = uri.strip_prefix("file://") {
+        PathBuf::from(percent_decode_str(rest)?)
+    } else if let Some(rest) = uri.strip_prefix("file:") {
+        PathBuf::from(percent_decode_str(rest)?)
+    } else if has_scheme(uri) {
+        return Err("unsupported URI scheme (only relative paths, file: and data: URIs)".into());
+    } else {
+        base.join(percent_decode_str(uri)?)
+    };
+    crate::io::read_regular_file(&file)
+}
+
+/// Decodes `%XX` escapes.
+fn percent_decode(s: &str) -> Result<Vec<u8>, String> {
+    let bytes = s.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while let Some(&b) = bytes.get(i) {
+        if b == b'%' {
+            let hex = bytes
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .ok_or_else(|| format!("invalid percent-encoding at offset {i}"))?;
+            out.push(hex);
+            i += 3;
+        } else {
+            out.push(b);
+            i += 1;
+        }
+    }
+    Ok(out)
+}
+
+/// Decodes `%XX` escapes into a UTF-8 string.
+fn percent_decode_str(s: &str) -> Result<String, String> {
+    String::from_utf8(percent_decode(s)?)
+        .map_err(|_| "percent-encoded path is not valid UTF-8".to_string())
+}
+
+/// Decodes standard or URL-safe base64, with or without padding.
+fn base64_decode(s: &str) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(s.len() / 4 * 3 + 3);
+    let mut acc: u32 = 0;
+    let mut bits = 0u32;
+    for (i, c) in s.bytes().enumerate() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            b'=' => break,
+            b' ' | b'\t' | b'\r' | b'\n' => continue,
+            _ => return Err(format!("invalid base64 character at offset {i}")),
+        };
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    Ok(out)
+}
+
+// ---------------------------------------------------------------------------
+// Accessors
+// ---------------------------------------------------------------------------
+
+/// The bytes of a buffer view, bounds-checked against its buffer.
+fn view_bytes<'c>(ctx: &'c Ctx, view: &gltf::buffer::View) -> Result<&'c [u8], String> {
+    let buffer = ctx
+        .buffers
+        .get(view.buffer().index())
+        .ok_or_else(|| format!("buffer view {} has no buffer", view.index()))?;
+    let start = view.offset();
+    start
+        .checked_add(view.length())
+        .and_then(|end| buffer.get(start..end))
+        .ok_or_else(|| {
+            format!(
+                "buffer view {} (bytes {start}..{}) exceeds its buffer of {} bytes",
+                view.index(),
+                start.saturating_add(view.length()),
+                buffer.len()
+            )
+        })
+}
+
+/// Copies an accessor's elements into a tightly packed byte vector,
+/// applying sparse substitution. Returns the bytes and the element size.
+fn accessor_bytes(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<(Vec<u8>, usize), String> {
+    let dims = accessor.dimensions();
+    if matches!(dims, Dimensions::Mat2 | Dimensions::Mat3 | Dimensions::Mat4) {
+        return Err("matrix accessors are not supported here".into());
+    }
+    let elem = accessor.data_type().size() * dims.multiplicity();
+    let count = accessor.count();
+    let total = count
+        .checked_mul(elem)
+        .ok_or_else(|| format!("accessor count {count} is too large"))?;
+    let mut out = match accessor.view() {
+        Some(view) => {
+            let data = view_bytes(ctx, &view)?;
+            let stride = view.stride().unwrap_or(elem);
+            if stride < elem {
+                return Err(format!(
+                    "byteStride {stride} is smaller than the element size {elem}"
+                ));
+            }
+            let start = accessor.offset();
+            let end = match count.checked_sub(1) {
+                None => start,
+                Some(last) => last
+                    .checked_mul(stride)
+                    .and_then(|x| x.checked_add(start))
+                    .and_then(|x| x.checked_add(elem))
+                    .ok_or_else(|| format!("accessor count {count} is too large"))?,
+            };
+            if end > data.len() {
+                return Err(format!(
+                    "accessor needs bytes {start}..{end} of buffer view {} which has {} bytes",
+                    view.index(),
+                    data.len()
+                ));
+            }
+            let mut out = Vec::with_capacity(total);
+            for i in 0..count {
+                let s = start + i * stride;
+                let chunk = data
+                    .get(s..s + elem)
+                    .ok_or("accessor element out of bounds")?;
+                out.extend_from_slice(chunk);
+            }
+            out
+        }
+        None => {
+            if accessor.sparse().is_none() {
+                return Err("accessor has neither a buffer view nor sparse data".into());
+            }
+            if count > MAX_SPARSE_ELEMENTS {
+                return Err(format!("sparse accessor count {count} is too large"));
+            }
+            vec![0; total]
+        }
+    };
+    if let Some(sparse) = accessor.sparse() {
+        let n = sparse.count();
+        if n > count {
+            return Err(format!(
+                "sparse accessor substitutes {n} elements of {count}"
+            ));
+        }
+        let indices = sparse.indices();
+        let isize = indices.index_type().size();
+        let idata = view_bytes(ctx, &indices.view())?;
+        let ibytes = n
+            .checked_mul(isize)
+            .and_then(|len| idata.get(indices.offset()..)?.get(..len))
+            .ok_or("sparse indices exceed their buffer view")?;
+        let values = sparse.values();
+        let vdata = view_bytes(ctx, &values.view())?;
+        let vbytes = n
+            .checked_mul(elem)
+            .and_then(|len| vdata.get(values.offset()..)?.get(..len))
+            .ok_or("sparse values exceed their buffer view")?;
+        for (ib, value) in ibytes.chunks_exact(isize).zip(vbytes.chunks_exact(elem)) {
+            let target = match *ib {
+                [a] => a as usize,
+                [a, b] => u16::from_le_bytes([a, b]) as usize,
+                [a, b, c, d] => u32::from_le_bytes([a, b, c, d]) as usize,
+                _ => return Err("invalid sparse index size".into()),
+            };
+            let slot = target
+                .checked_mul(elem)
+                .and_then(|s| out.get_mut(s..s + elem))
+                .ok_or_else(|| {
+                    format!("sparse index {target} is out of range (accessor count {count})")
+                })?;
+            slot.copy_from_slice(value);
+        }
+    }
+    Ok((out, elem))
+}
+
+/// Reads a float vector attribute with `n` components per element
+/// (normalized integer types are mapped to `[0, 1]` / `[-1, 1]`).
+fn read_floats(ctx: &Ctx, accessor: &gltf::Accessor, n: usize) -> Result<Vec<f32>, String> {
+    let dims = accessor.dimensions();
+    if dims.multiplicity() != n || matches!(dims, Dimensions::Mat2) {
+        return Err(format!(
+            "expected {n} components per element, found type {dims:?}"
+        ));
+    }
+    let (bytes, _) = accessor_bytes(ctx, accessor)?;
+    let norm = accessor.normalized();
+    let values: Vec<f32> = match accessor.data_type() {
+        DataType::F32 => bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+        DataType::U8 => bytes
+            .iter()
+            .map(|&b| if norm { b as f32 / 255.0 } else { b as f32 })
+            .collect(),
+        DataType::I8 => bytes
+            .iter()
+            .map(|&b| {
+                let v = b as i8 as f32;
+                if norm { (v / 127.0).max(-1.0) } else { v }
+            })
+            .collect(),
+        DataType::U16 => bytes
+            .chunks_exact(2)
+            .map(|c| {
+                let v = u16::from_le_bytes([c[0], c[1]]) as f32;
+                if norm { v / 65535.0 } else { v }
+            })
+            .collect(),
+        DataType::I16 => bytes
+            .chunks_exact(2)
+            .map(|c| {
+                let v = i16::from_le_bytes([c[0], c[1]]) as f32;
+                if norm { (v / 32767.0).max(-1.0) } else { v }
+            })
+            .collect(),
+        DataType::U32 => bytes
+            .chunks_exact(4)
+            .map(|c| {
+                let v = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                if norm {
+                    (v as f64 / u32::MAX as f64) as f32
+                } else {
+                    v as f32
+                }
+            })
+            .collect(),
+    };
+    Ok(values)
+}
+
+fn read_vec3(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<Vec<Vec3>, String> {
+    Ok(read_floats(ctx, accessor, 3)?
+        .chunks_exact(3)
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .collect())
+}
+
+fn read_vec2(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<Vec<Vec2>, String> {
+    Ok(read_floats(ctx, accessor, 2)?
+        .chunks_exact(2)
+        .map(|c| Vec2::new(c[0], c[1]))
+        .collect())
+}
+
+/// Reads an index accessor (unsigned scalar integers).
+fn read_indices(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<Vec<u32>, String> {
+    if accessor.dimensions() != Dimensions::Scalar {
+        return Err(format!(
+            "index accessor must be SCALAR, found {:?}",
+            accessor.dimensions()
+        ));
+    }
+    let (bytes, _) = accessor_bytes(ctx, accessor)?;
+    match accessor.data_type() {
+        DataType::U8 => Ok(bytes.iter().map(|&b| u32::from(b)).collect()),
+        DataType::U16 => Ok(bytes
+            .chunks_exact(2)
+            .map(|c| u32::from(u16::from_le_bytes([c[0], c[1]])))
+            .collect()),
+        DataType::U32 => Ok(bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()),
+        t => Err(format!(
+            "index accessor must use unsigned integers, found {t:?}"
+        )),
+    }
+}
+
+/// Converts an index list of the given mode to triangles (glTF's vertex
+/// order for strips and fans).
+fn triangulate(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => idx
+            .windows(3)
+            .enumerate()
+            .map(|(i, w)| {
+                if i % 2 == 0 {
+                    [w[0], w[1], w[2]]
+                } else {
+                    [w[0], w[2], w[1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => match idx.split_first() {
+            Some((&first, rest)) => rest.windows(2).map(|w| [w[0], w[1], first]).collect(),
+            None => Vec::new(),
+        },
+        _ => Vec::new(),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Meshes
+// ---------------------------------------------------------------------------
+
+/// The shared mesh of one primitive, or `None` when it has nothing to
+/// render (points, lines, no triangles).
+fn primitive_mesh(
+    ctx: &Ctx,
+    st: &mut State,
+    mesh: &gltf::Mesh,
+    primitive: &gltf::Primitive,
+) -> Result<Option<Arc<Mesh>>, String> {
+    let key = (mesh.index(), primitive.index());
+    if let Some(cached) = st.meshes.get(&key) {
+        return Ok(cached.clone());
+    }
+    let built = build_primitive(ctx, st, mesh, primitive)?.map(Arc::new);
+    st.meshes.insert(key, built.clone());
+    Ok(built)
+}
+
+fn mesh_name(mesh: &gltf::Mesh) -> String {
+    match mesh.name() {
+        Some(name) => name.to_string(),
+        None => format!("mesh {}", mesh.index()),
+    }
+}
+
+fn build_primitive(
+    ctx: &Ctx,
+    st: &mut State,
+    mesh: &gltf::Mesh,
+    primitive: &gltf::Primitive,
+) -> Result<Option<Mesh>, String> {
+    let name = mesh_name(mesh);
+    let pi = primitive.index();
+    let fail = |e: String| format!("mesh '{name}' primitive {pi}: {e}");
+    let mode = primitive.mode();
+    if matches!(
+        mode,
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+    ) {
+        st.skipped_primitives += 1;
+        return Ok(None);
+    }
+    let positions = match primitive.get(&Semantic::Positions) {
+        Some(a) => read_vec3(ctx, &a).map_err(|e| fail(format!("POSITION: {e}")))?,
+        None => return Err(fail("no POSITION attribute".into())),
+    };
+    if let Some((i, p)) = positions
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.is_finite() && p.abs().max_element() > MAX_COORDINATE)
+    {
+        return Err(fail(format!(
+            "vertex {i} position {p} is farther than {MAX_COORDINATE:e} from the origin"
+        )));
+    }
+    let normals = match primitive.get(&Semantic::Normals) {
+        Some(a) => Some(read_vec3(ctx, &a).map_err(|e| fail(format!("NORMAL: {e}")))?),
+        None => None,
+    };
+    let uvs = match primitive.get(&Semantic::TexCoords(0)) {
+        Some(a) => Some(read_vec2(ctx, &a).map_err(|e| fail(format!("TEXCOORD_0: {e}")))?),
+        None => None,
+    };
+    let indices = match primitive.indices() {
+        Some(a) => read_indices(ctx, &a).map_err(|e| fail(format!("indices: {e}")))?,
+        None => {
+            let n = u32::try_from(positions.len())
+                .map_err(|_| fail(format!("{} vertices is too many", positions.len())))?;
+            (0..n).collect()
+        }
+    };
+    let triangles = triangulate(mode, &indices);
+    if triangles.is_empty() || positions.is_empty() {
+        st.warn(format!(
+            "mesh '{name}' primitive {pi} has no triangles; skipped"
+        ));
+        return Ok(None);
+    }
+    let normal_mode = if normals.is_some() {
+        NormalMode::Smooth
+    } else {
+        NormalMode::Flat
+    };
+    let label = if mesh.primitives().len() > 1 {
+        format!("{name}/{pi}")
+    } else {
+        name.clone()
+    };
+    let data = MeshData {
+        positions,
+        normals,
+        uvs,
+        indices: triangles,
+    };
+    Mesh::new(label, data, normal_mode, st.quality)
+        .map(Some)
+        .map_err(fail)
+}
+
+// ---------------------------------------------------------------------------
+// Materials and textures
+// ---------------------------------------------------------------------------
+
+/// Decodes image `index` (once; cached).
+fn decoded_image<'s>(
+    ctx: &Ctx,
+    st: &'s mut State,
+    index: usize,
+) -> Result<&'s image::DynamicImage, String> {
+    match st.decoded.entry(index) {
+        std::collections::hash_map::Entry::Occupied(e) => Ok(e.into_mut()),
+        std::collections::hash_map::Entry::Vacant(e) => Ok(e.insert(decode_image(ctx, index)?)),
+    }
+}
+
+fn decode_image(ctx: &Ctx, index: usize) -> Result<image::DynamicImage, String> {
+    let json = ctx
+        .document
+        .as_json()
+        .images
+        .get(index)
+        .ok_or_else(|| format!("image {index} does not exist"))?;
+    let mime = json.mime_type.as_ref().map(|m| m.0.as_str());
+    let (bytes, label): (Vec<u8>, String) = if let Some(view) = json.buffer_view {
+        let view = ctx
+            .document
+            .views()
+            .nth(view.value())
+            .ok_or_else(|| format!("image {index} refers to a missing buffer view"))?;
+        let label = match &json.name {
+            Some(name) => format!("image {index} ('{name}')"),
+            None => format!("image {index}"),
+        };
+        (view_bytes(ctx, &view)?.to_vec(), label)
+    } else if let Some(uri) = &json.uri {
+        let label = format!("image '{}'", uri_label(uri));
+        let bytes = read_uri(&ctx.base, uri).map_err(|e| format!("cannot read {label}: {e}"))?;
+        (bytes, label)
+    } else {
+        return Err(format!("image {index} has neither a uri nor a bufferView"));
+    };
+    let format = image::guess_format(&bytes)
+        .ok()
+        .or(match mime {
+            Some("image/png") => Some(image::ImageFormat::Png),
+            Some("image/jpeg") => Some(image::ImageFormat::Jpeg),
+            _ => None,
+        })
+        .ok_or_else(|| format!("cannot decode {label}: unrecognised image format"))?;
+    image::ImageReader::with_format(Cursor::new(bytes), format)
+        .decode()
+        .map_err(|e| format!("cannot decode {label}: {e}"))
+}
+
+/// Converts a decoded image to linear RGB texels.
+fn to_texture(img: &image::DynamicImage, srgb: bool) -> Result<ImageTexture, String> {
+    use image::DynamicImage as D;
+    let (width, height) = (img.width(), img.height());
+    if width == 0 || height == 0 {
+        return Err("image has no pixels".into());
+    }
+    let texels: Vec<Vec3> = match img {
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
+            let lut: [f32; 256] = std::array::from_fn(|i| {
+                let c = i as f32 / 255.0;
+                if srgb { srgb_to_linear(c) } else { c }
+            });
+            img.to_rgb8()
+                .pixels()
+                .map(|p| Vec3::from(p.0.map(|c| lut[c as usize])))
+                .collect()
+        }
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => img
+            .to_rgb32f()
+            .pixels()
+            .map(|p| {
+                let v = Vec3::from(p.0);
+                if srgb { v.map(srgb_to_linear) } else { v }
+            })
+            .collect(),
+        D::ImageRgb32F(_) | D::ImageRgba32F(_) => img
+            .to_rgb32f()
+            .pixels()
+            .map(|p| {
+                let v = Vec3::from(p.0);
+                if v.is_finite() { v } else { Vec3::ZERO }
+            })
+            .collect(),
+        other => {
+            return Err(format!("unsupported pixel format {:?}", other.color()));
+        }
+    };
+    Ok(ImageTexture {
+        width,
+        height,
+        texels,
+    })
+}
+
+/// The linear texture of image `index` (sRGB-decoded if `srgb`), cached.
+fn image_texture(
+    ctx: &Ctx,
+    st: &mut State,
+    index: usize,
+    srgb: bool,
+) -> Result<Arc<ImageTexture>, String> {
+    if let Some(t) = st.textures.get(&(index, srgb)) {
+        return Ok(t.clone());
+    }
+    let img = decoded_image(ctx, st, index)?;
+    let texture = Arc::new(to_texture(img, srgb).map_err(|e| format!("image {index}: {e}"))?);
+    st.textures.insert((index, srgb), texture.clone());
+    Ok(texture)
+}
+
+/// A [`Texture`] for a material's texture reference.
+fn texture(
+    ctx: &Ctx,
+    st: &mut State,
+    info: &gltf::texture::Info,
+    srgb: bool,
+    what: &str,
+    material: &str,
+) -> Result<Texture, String> {
+    let mut set = info.tex_coord();
+    let transform = match info.texture_transform() {
+        Some(t) => {
+            if let Some(s) = t.tex_coord() {
+                set = s;
+            }
+            let transform = UvTransform {
+                offset: Vec2::from(t.offset()),
+                rotation: t.rotation(),
+                scale: Vec2::from(t.scale()),
+            };
+            if !(transform.offset.is_finite()
+                && transform.rotation.is_finite()
+                && transform.scale.is_finite())
+            {
+                return Err(format!(
+                    "{material}: {what} has a non-finite KHR_texture_transform"
+                ));
+            }
+            transform
+        }
+        None => UvTransform::default(),
+    };
+    if set != 0 {
+        st.warn(format!(
+            "{material}: {what} uses TEXCOORD_{set}; TEXCOORD_0 is used instead"
+        ));
+    }
+    let image_index = info.texture().source().index();
+    let image = image_texture(ctx, st, image_index, srgb)
+        .map_err(|e| format!("{material}: {what}: {e}"))?;
+    Ok(Texture::Image { image, transform })
+}
+
+fn material_label(m: &gltf::Material) -> String {
+    match (m.index(), m.name()) {
+        (Some(i), Some(name)) => format!("material {i} ('{name}')"),
+        (Some(i), None) => format!("material {i}"),
+        (None, _) => "default material".to_string(),
+    }
+}
+
+/// Checks a colour factor: finite and non-negative.
+fn check_color(c: Vec3, what: &str, owner: &str) -> Result<(), String> {
+    if !c.is_finite() {
+        return Err(format!("{owner}: {what} is not finite"));
+    }
+    if c.min_element() < 0.0 {
+        return Err(format!("{owner}: {what} is negative"));
+    }
+    Ok(())
+}
+
+/// Checks a scalar factor: finite and non-negative.
+fn check_factor(v: f32, what: &str, owner: &str) -> Result<(), String> {
+    if !v.is_finite() {
+        return Err(format!("{owner}: {what} is not finite"));
+    }
+    if v < 0.0 {
+        return Err(format!("{owner}: {what} is negative ({v})"));
+    }
+    Ok(())
+}
+
+/// The material of a primitive, converted once per glTF material.
+fn material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Material, String> {
+    if let Some(cached) = st.materials.get(&m.index()) {
+        return Ok(cached.clone());
+    }
+    let converted = convert_material(ctx, st, m)?;
+    st.materials.insert(m.index(), converted.clone());
+    Ok(converted)
+}
+
+fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Material, String> {
+    let label = material_label(m);
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, _alpha] = pbr.base_color_factor();
+    let base = Vec3::new(r, g, b);
+    check_color(base, "base colour factor", &label)?;
+    let metallic = pbr.metallic_factor();
+    check_factor(metallic, "metallic factor", &label)?;
+    let roughness = pbr.roughness_factor();
+    check_factor(roughness, "roughness factor", &label)?;
+    let (specular_factor, specular_color) = match m.specular() {
+        Some(s) => (s.specular_factor(), Vec3::from(s.specular_color_factor())),
+        None => (1.0, Vec3::ONE),
+    };
+    check_factor(specular_factor, "specular factor", &label)?;
+    check_color(specular_color, "specular colour factor", &label)?;
+    let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor());
+    check_factor(transmission, "transmission factor", &label)?;
+    let ior = m.ior().unwrap_or(1.5);
+    if !(ior.is_finite() && ior > 0.0) {
+        return Err(format!(
+            "{label}: index of refraction {ior} is not a positive number"
+        ));
+    }
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    check_factor(strength, "emissive strength", &label)?;
+    let emissive = Vec3::from(m.emissive_factor());
+    check_color(emissive, "emissive factor", &label)?;
+    let emission = emissive * strength;
+    check_color(emission, "emission (factor times strength)", &label)?;
+
+    // F0 of a dielectric from its index of refraction (0.04 for 1.5), as
+    // the glTF specification derives it, scaled by KHR_materials_specular.
+    let f0_ior = ((ior - 1.0) / (ior + 1.0)).powi(2);
+    let dielectric_f0: Color = f0_ior * specular_factor * specular_color;
+    let mut material = Material::from_metallic_roughness(
+        base,
+        metallic,
+        roughness,
+        dielectric_f0,
+        transmission,
+        ior,
+    );
+    material.emission = emission;
+    if let Some(info) = pbr.base_color_texture() {
+        material.base_color_texture = Some(texture(
+            ctx,
+            st,
+            &info,
+            true,
+            "base colour texture",
+            &label,
+        )?);
+    }
+    if let Some(info) = pbr.metallic_roughness_texture() {
+        let t = texture(ctx, st, &info, false, "metallic-roughness texture", &label)?;
+        if let Some(mr) = material.metallic_roughness.as_mut() {
+            mr.texture = Some(t);
+        }
+    }
+    // The emissive texture only scales the emissive factor: skip decoding
+    // it when the factor is zero.
+    if let Some(info) = m.emissive_texture()
+        && emission != Vec3::ZERO
+    {
+        material.emission_texture =
+            Some(texture(ctx, st, &info, true, "emissive texture", &label)?);
+    }
+    Ok(material)
+}
+
+// ---------------------------------------------------------------------------
+// Scene graph
+// ---------------------------------------------------------------------------
+
+fn node_label(node: &gltf::Node) -> String {
+    match node.name() {
+        Some(name) => format!("node {} ('{name}')", node.index()),
+        None => format!("node {}", node.index()),
+    }
+}
+
+/// The node's local transform. TRS quaternions are normalised; the last
+/// row of a matrix is ignored (glTF requires it to be `0 0 0 1`).
+fn local_transform(node: &gltf::Node, label: &str) -> Result<Affine3A, String> {
+    let local = match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            Affine3A::from_mat4(Mat4::from_cols_array_2d(&matrix))
+        }
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let rotation = Quat::from_array(rotation);
+            let length = rotation.length();
+            if !(length.is_finite() && length > 0.0) {
+                return Err(format!(
+                    "{label}: rotation {rotation} is not a valid quaternion"
+                ));
+            }
+            Affine3A::from_scale_rotation_translation(
+                Vec3::from(scale),
+                rotation / length,
+                Vec3::from(translation),
+            )
+        }
+    };
+    if !local.is_finite() {
+        return Err(format!("{label}: transform is not finite"));
+    }
+    Ok(local)
+}
+
+/// Fails if any node is its own ancestor.
+fn check_cycles(nodes: &[gltf::Node]) -> Result<(), String> {
+    let children: Vec<Vec<usize>> = nodes
+        .iter()
+        .map(|n| n.children().map(|c| c.index()).collect())
+        .collect();
+    // 0 = unvisited, 1 = on the current path, 2 = done.
+    let mut state = vec![0u8; nodes.len()];
+    for start in 0..nodes.len() {
+        if state[start] != 0 {
+            continue;
+        }
+        state[start] = 1;
+        let mut stack: Vec<(usize, usize)> = vec![(start, 0)];
+        while let Some(top) = stack.last_mut() {
+            let (v, next) = *top;
+            top.1 += 1;
+            match children.get(v).and_then(|c| c.get(next)) {
+                Some(&c) => match state.get(c) {
+                    Some(0) => {
+                        state[c] = 1;
+                        stack.push((c, 0));
+                    }
+                    Some(1) => {
+                        let name =
+                            |i: usize| nodes.get(i).map_or_else(|| format!("node {i}"), node_label);
+                        return Err(if v == c {
+                            format!(
+                                "the node hierarchy has a cycle: {} lists itself as a child",
+                                name(v)
+                            )
+                        } else {
+                            format!(
+                                "the node hierarchy has a cycle: {} lists {} as a child, \
+                                 but that node is also its ancestor",
+                                name(v),
+                                name(c)
+                            )
+                        });
+                    }
+                    _ => {}
+                },
+                None => {
+                    state[v] = 2;
+                    stack.pop();
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Walks the scene and assembles the description.
+fn build_scene(ctx: &Ctx, st: &mut State, quality: BuildQuality) -> Result<SceneDesc, String> {
+    st.quality = quality;
+    let doc = &ctx.document;
+    let nodes: Vec<gltf::Node> = doc.nodes().collect();
+    check_cycles(&nodes)?;
+    let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().map(|n| n.index()).collect(),
+        None => {
+            let mut is_child = vec![false; nodes.len()];
+            for n in &nodes {
+                for c in n.children() {
+                    if let Some(flag) = is_child.get_mut(c.index()) {
+                        *flag = true;
+                    }
+                }
+            }
+            (0..nodes.len()).filter(|&i| !is_child[i]).collect()
+        }
+    };
+
+    let mut scene = SceneDesc::default();
+    let mut stack: Vec<(usize, Affine3A, usize)> = roots
+        .iter()
+        .rev()
+        .map(|&i| (i, Affine3A::IDENTITY, 0))
+        .collect();
+    let mut visits = 0usize;
+    while let Some((index, parent, depth)) = stack.pop() {
+        let node = nodes
+            .get(index)
+            .ok_or_else(|| format!("node {index} does not exist"))?;
+        let label = node_label(node);
+        if depth >= MAX_DEPTH {
+            return Err(format!(
+                "{label}: node hierarchy is deeper than {MAX_DEPTH} levels"
+            ));
+        }
+        visits += 1;
+        if visits > MAX_NODE_VISITS {
+            return Err(format!(
+                "the node hierarchy expands to more than {MAX_NODE_VISITS} node instances"
+            ));
+        }
+        let local = local_transform(node, &label)?;
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(format!("{label}: world transform is not finite"));
+        }
+        visit_node(ctx, st, &mut scene, node, &label, world)?;
+        let children: Vec<usize> = node.children().map(|c| c.index()).collect();
+        for &c in children.iter().rev() {
+            stack.push((c, world, depth + 1));
+        }
+    }
+    Ok(scene)
+}
+
+/// Adds a node's meshes, light and camera.
+fn visit_node(
+    ctx: &Ctx,
+    st: &mut State,
+    scene: &mut SceneDesc,
+    node: &gltf::Node,
+    label: &str,
+    world: Affine3A,
+) -> Result<(), String> {
+    let transform = Transform(world);
+    if let Some(mesh) = node.mesh() {
+        if transform.is_valid() {
+            for primitive in mesh.primitives() {
+                let Some(geometry) = primitive_mesh(ctx, st, &mesh, &primitive)? else {
+                    continue;
+                };
+                check_world_bounds(&geometry, &world, label)?;
+                let material = material(ctx, st, &primitive.material())?;
+                scene.objects.push(ObjectDesc {
+                    name: Some(node.name().map_or_else(|| mesh_name(&mesh), str::to_string)),
+                    transform,
+                    geometry: Geometry::Mesh(geometry),
+                    material,
+                });
+            }
+        } else {
+            st.warn(format!(
+                "{label}: transform is not invertible (zero scale?); its mesh is skipped"
+            ));
+        }
+    }
+    if let Some(light) = node.light() {
+        scene.lights.push(convert_light(&light, label, transform)?);
+    }
+    if let Some(camera) = node.camera()
+        && let Some(c) = convert_camera(st, &camera, label, world)?
+    {
+        scene.cameras.push(c);
+    }
+    Ok(())
+}
+
+/// Fails if a mesh placed by `world` reaches farther than
+/// [`MAX_COORDINATE`] from the origin.
+fn check_world_bounds(mesh: &Mesh, world: &Affine3A, node: &str) -> Result<(), String> {
+    let Some((lo, hi)) = mesh.bounds() else {
+        return Ok(());
+    };
+    for i in 0..8 {
+        let corner = Vec3A::select(
+            glam::BVec3A::new(i & 1 != 0, i & 2 != 0, i & 4 != 0),
+            hi,
+            lo,
+        );
+        let p = world.transform_point3a(corner);
+        if !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE) {
+            return Err(format!(
+                "{node}: mesh '{}' reaches farther than {MAX_COORDINATE:e} from the origin \
+                 in world space",
+                mesh.name
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn convert_light(
+    light: &gltf::khr_lights_punctual::Light,
+    node: &str,
+    transform: Transform,
+) -> Result<LightDesc, String> {
+    use gltf::khr_lights_punctual::Kind;
+    let label = match light.name() {
+        Some(name) => format!("light {} ('{name}') at {node}", light.index()),
+        None => format!("light {} at {node}", light.index()),
+    };
+    let color = Vec3::from(light.color());
+    check_color(color, "colour", &label)?;
+    let intensity = light.intensity();
+    check_factor(intensity, "intensity", &label)?;
+    let value = color * intensity;
+    check_color(value, "colour times intensity", &label)?;
+    let light_value = match light.kind() {
+        Kind::Point => Light::Point { intensity: value },
+        Kind::Directional => Light::Directional { illuminance: value },
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => {
+            if !(inner_cone_angle.is_finite() && outer_cone_angle.is_finite()) {
+                return Err(format!("{label}: spot cone angles are not finite"));
+            }
+            Light::Spot {
+                intensity: value,
+                inner_angle: inner_cone_angle,
+                outer_angle: outer_cone_angle,
+            }
+        }
+    };
+    Ok(LightDesc {
+        name: light.name().map(str::to_string),
+        transform,
+        light: light_value,
+    })
+}
+
+fn convert_camera(
+    st: &mut State,
+    camera: &gltf::Camera,
+    node: &str,
+    world: Affine3A,
+) -> Result<Option<Camera>, String> {
+    let label = match camera.name() {
+        Some(name) => format!("camera {} ('{name}') at {node}", camera.index()),
+        None => format!("camera {} at {node}", camera.index()),
+    };
+    let yfov = match camera.projection() {
+        gltf::camera::Projection::Perspective(p) => p.yfov(),
+        gltf::camera::Projection::Orthographic(_) => {
+            st.warn(format!(
+                "{label} is orthographic; skipped (the renderer is pinhole only)"
+            ));
+            return Ok(None);
+        }
+    };
+    if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
+        return Err(format!("{label}: yfov {yfov} is not in (0, pi) radians"));
+    }
+    let position = Vec3::from(world.translation);
+    let forward = Vec3::from(world.matrix3.mul_vec3a(Vec3A::NEG_Z)).normalize_or_zero();
+    let up = Vec3::from(world.matrix3.mul_vec3a(Vec3A::Y)).normalize_or_zero();
+    let result = Camera {
+        look_from: position,
+        look_at: position + forward,
+        up,
+        vfov_degrees: yfov.to_degrees(),
+        name: camera.name().map(str::to_string),
+    };
+    result.validate().map_err(|e| format!("{label}: {e}"))?;
+    Ok(Some(result))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::light::WorldLight;
+    use serde_json::{Value, json};
+
+    fn b64(bytes: &[u8]) -> String {
+        const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        let mut s = String::new();
+        for chunk in bytes.chunks(3) {
+            let b = [
+                chunk[0],
+                *chunk.get(1).unwrap_or(&0),
+                *chunk.get(2).unwrap_or(&0),
+            ];
+            let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+            for k in 0..4 {
+                if k <= chunk.len() {
+                    s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+                } else {
+                    s.push('=');
+                }
+            }
+        }
+        s
+    }
+
+    /// A unit quad in the XY plane: positions (48 bytes), normals (48),
+    /// uvs (32), u16 indices (12), then a sparse index (4) and value (12).
+    fn quad_buffer(indices: [u16; 6]) -> Vec<u8> {
+        let mut b = Vec::new();
+        for p in [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ] {
+            p.iter().for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+        }
+        for _ in 0..4 {
+            [0.0f32, 0.0, 1.0]
+                .iter()
+                .for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+        }
+        for uv in [[0.0f32, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]] {
+            uv.iter()
+                .for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+        }
+        indices
+            .iter()
+            .for_each(|i| b.extend_from_slice(&i.to_le_bytes()));
+        b.extend_from_slice(&2u16.to_le_bytes());
+        b.extend_from_slice(&[0, 0]);
+        [5.0f32, 5.0, 5.0]
+            .iter()
+            .for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+        b
+    }
+
+    const QUAD: [u16; 6] = [0, 1, 2, 0, 2, 3];
+
+    /// A document with the quad's buffer views and accessors; `buffer` is
+    /// the buffer object (uri or not).
+    fn quad_doc(buffer: Value) -> Value {
+        json!({
+            "asset": {"version": "2.0"},
+            "buffers": [buffer],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                {"buffer": 0, "byteOffset": 48, "byteLength": 48},
+                {"buffer": 0, "byteOffset": 96, "byteLength": 32},
+                {"buffer": 0, "byteOffset": 128, "byteLength": 12},
+                {"buffer": 0, "byteOffset": 140, "byteLength": 2},
+                {"buffer": 0, "byteOffset": 144, "byteLength": 12}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                 "min": [0, 0, 0], "max": [1, 1, 0]},
+                {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+                {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+                {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"},
+                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                 "min": [0, 0, 0], "max": [5, 5, 5],
+                 "sparse": {"count": 1,
+                            "indices": {"bufferView": 4, "componentType": 5123},
+                            "values": {"bufferView": 5}}}
+            ],
+            "meshes": [{"name": "quad", "primitives": [
+                {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3}
+            ]}],
+            "nodes": [{"mesh": 0}],
+            "scenes": [{"nodes": [0]}]
+        })
+    }
+
+    const BUFFER_LEN: usize = 156;
+
+    fn embedded(indices: [u16; 6]) -> Value {
+        json!({
+            "byteLength": BUFFER_LEN,
+            "uri": format!("data:application/octet-stream;base64,{}", b64(&quad_buffer(indices)))
+        })
+    }
+
+    fn write(dir: &Path, name: &str, doc: &Value) -> PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, serde_json::to_vec_pretty(doc).unwrap()).unwrap();
+        path
+    }
+
+    fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+        let mut j = serde_json::to_vec(doc).unwrap();
+        while !j.len().is_multiple_of(4) {
+            j.push(b' ');
+        }
+        let mut b = bin.to_vec();
+        while !b.len().is_multiple_of(4) {
+            b.push(0);
+        }
+        let total = 12 + 8 + j.len() + 8 + b.len();
+        let mut out = Vec::new();
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&j);
+        out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&b);
+        out
+    }
+
+    fn load(path: &Path) -> crate::Result<SceneDesc> {
+        load_gltf(path, BuildQuality::Fastest)
+    }
+
+    /// Loads a file that must fail and returns the message.
+    fn error_of(path: &Path) -> String {
+        match load(path) {
+            Ok(_) => panic!("{} loaded but should have failed", path.display()),
+            Err(e) => {
+                let message = e.to_string();
+                assert!(
+                    message.starts_with(&path.display().to_string()),
+                    "error does not name the file: {message}"
+                );
+                message
+            }
+        }
+    }
+
+    fn mesh_of(object: &ObjectDesc) -> &Arc<Mesh> {
+        match &object.geometry {
+            Geometry::Mesh(m) => m,
+            Geometry::Shape(_) => panic!("expected a mesh"),
+        }
+    }
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).abs().max_element() < 1e-5
+    }
+
+    #[test]
+    fn quad_scene_with_materials_light_and_camera() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["extensionsUsed"] = json!([
+            "KHR_lights_punctual",
+            "KHR_materials_specular",
+            "KHR_materials_emissive_strength"
+        ]);
+        doc["scene"] = json!(0);
+        doc["scenes"] = json!([{"nodes": [0, 2, 3]}]);
+        doc["nodes"] = json!([
+            {"name": "parent", "translation": [1, 0, 0], "scale": [2, 2, 2], "children": [1, 4]},
+            {"name": "quad", "mesh": 0, "translation": [0, 0, -1]},
+            {"name": "sun", "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0, 0, std::f32::consts::FRAC_1_SQRT_2],
+             "extensions": {"KHR_lights_punctual": {"light": 0}}},
+            {"name": "eye", "translation": [0, 1, 5], "camera": 0},
+            {"name": "quad2", "mesh": 0, "translation": [3, 0, 0]}
+        ]);
+        doc["meshes"] = json!([{"name": "quad", "primitives": [
+            {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0},
+            {"attributes": {"POSITION": 0}, "indices": 3, "material": 1},
+            {"attributes": {"POSITION": 0}, "indices": 3}
+        ]}]);
+        doc["materials"] = json!([
+            {"name": "matte",
+             "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.25, 1.0, 1.0],
+                                      "metallicFactor": 0.0, "roughnessFactor": 0.5},
+             "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}},
+            {"name": "mirror",
+             "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1.0],
+                                      "metallicFactor": 1.0, "roughnessFactor": 0.0},
+             "emissiveFactor": [1.0, 0.5, 0.0],
+             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}}}
+        ]);
+        doc["cameras"] = json!([{"type": "perspective", "name": "main",
+                                 "perspective": {"yfov": 0.8, "znear": 0.1}}]);
+        doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+            {"type": "directional", "name": "sun", "color": [1.0, 0.5, 0.25], "intensity": 3.0}
+        ]}});
+        let path = write(dir.path(), "quad.gltf", &doc);
+        let scene = load(&path).unwrap();
+
+        // Two nodes instance the mesh, three primitives each.
+        assert_eq!(scene.objects.len(), 6);
+        let names: Vec<_> = scene
+            .objects
+            .iter()
+            .map(|o| o.name.clone().unwrap())
+            .collect();
+        assert_eq!(names, ["quad", "quad", "quad", "quad2", "quad2", "quad2"]);
+        for o in &scene.objects {
+            assert_eq!(mesh_of(o).triangle_count(), 2);
+        }
+        assert!(Arc::ptr_eq(
+            mesh_of(&scene.objects[0]),
+            mesh_of(&scene.objects[3])
+        ));
+        assert!(!Arc::ptr_eq(
+            mesh_of(&scene.objects[0]),
+            mesh_of(&scene.objects[1])
+        ));
+
+        // parent (T(1,0,0) S(2)) * child T(0,0,-1).
+        let t = scene.objects[0].transform.0;
+        assert!(close(
+            t.transform_point3(Vec3::ZERO),
+            Vec3::new(1.0, 0.0, -2.0)
+        ));
+        assert!(close(
+            t.transform_vector3(Vec3::X),
+            Vec3::new(2.0, 0.0, 0.0)
+        ));
+        let t2 = scene.objects[3].transform.0;
+        assert!(close(
+            t2.transform_point3(Vec3::ZERO),
+            Vec3::new(7.0, 0.0, 0.0)
+        ));
+
+        // Specular factor 0: pure Lambertian with the base colour.
+        let matte = scene.objects[0].material.sample(Vec2::ZERO);
+        assert_eq!(matte.specular, Vec3::ZERO);
+        assert_eq!(matte.mirror, Vec3::ZERO);
+        assert!(close(matte.diffuse, Vec3::new(0.5, 0.25, 1.0)));
+        assert_eq!(matte.emission, Vec3::ZERO);
+
+        // Metallic 1, roughness 0: a mirror tinted by the base colour; the
+        // emissive strength scales the emissive factor.
+        let mirror = scene.objects[1].material.sample(Vec2::ZERO);
+        assert!(close(mirror.mirror, Vec3::new(0.9, 0.6, 0.3)));
+        assert_eq!(mirror.diffuse, Vec3::ZERO);
+        assert_eq!(mirror.specular, Vec3::ZERO);
+        assert!(close(mirror.emission, Vec3::new(4.0, 2.0, 0.0)));
+
+        // No material: glTF's default (white, metallic 1, roughness 1).
+        let default = &scene.objects[2].material;
+        assert_eq!(default.base_color, Vec3::ONE);
+        let mr = default.metallic_roughness.as_ref().unwrap();
+        assert_eq!((mr.metallic, mr.roughness), (1.0, 1.0));
+        assert!(close(mr.dielectric_f0, Vec3::splat(0.04)));
+
+        // The directional light points down its node's rotated -Z.
+        assert_eq!(scene.lights.len(), 1);
+        let light = &scene.lights[0];
+        assert_eq!(light.name.as_deref(), Some("sun"));
+        match light.light {
+            Light::Directional { illuminance } => {
+                assert!(close(illuminance, Vec3::new(3.0, 1.5, 0.75)))
+            }
+            other => panic!("expected a directional light, got {other:?}"),
+        }
+        match WorldLight::new(&light.light, &light.transform) {
+            WorldLight::Directional { direction, .. } => {
+                assert!(close(direction.into(), Vec3::new(0.0, -1.0, 0.0)))
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+
+        assert_eq!(scene.cameras.len(), 1);
+        let cam = &scene.cameras[0];
+        assert_eq!(cam.name.as_deref(), Some("main"));
+        assert!(close(cam.look_from, Vec3::new(0.0, 1.0, 5.0)));
+        assert!(close(cam.look_at, Vec3::new(0.0, 1.0, 4.0)));
+        assert!(close(cam.up, Vec3::Y));
+        assert!((cam.vfov_degrees - 0.8f32.to_degrees()).abs() < 1e-4);
+        assert_eq!(scene.background, Vec3::ZERO);
+        assert_eq!(scene.settings, Default::default());
+    }
+
+    #[test]
+    fn point_and_spot_lights() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([
+            {"translation": [0, 2, 0], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+            {"translation": [1, 2, 3], "extensions": {"KHR_lights_punctual": {"light": 1}}}
+        ]);
+        doc["scenes"] = json!([{"nodes": [0, 1]}]);
+        doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+            {"type": "point", "intensity": 100.0, "range": 5.0},
+            {"type": "spot", "color": [0.0, 1.0, 0.0], "intensity": 10.0,
+             "spot": {"innerConeAngle": 0.1, "outerConeAngle": 0.5}}
+        ]}});
+        let scene = load(&write(dir.path(), "lights.gltf", &doc)).unwrap();
+        assert_eq!(scene.lights.len(), 2);
+        assert_eq!(
+            scene.lights[0].light,
+            Light::Point {
+                intensity: Vec3::splat(100.0)
+            }
+        );
+        assert!(close(
+            scene.lights[0].transform.0.translation.into(),
+            Vec3::new(0.0, 2.0, 0.0)
+        ));
+        assert_eq!(
+            scene.lights[1].light,
+            Light::Spot {
+                intensity: Vec3::new(0.0, 10.0, 0.0),
+                inner_angle: 0.1,
+                outer_angle: 0.5
+            }
+        );
+
+        // Negative intensity is an error naming the light.
+        doc["extensions"]["KHR_lights_punctual"]["lights"][0]["intensity"] = json!(-1.0);
+        let message = error_of(&write(dir.path(), "negative.gltf", &doc));
+        assert!(
+            message.contains("light 0") && message.contains("negative"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn textures_are_decoded_once_with_transform() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut img = image::RgbImage::new(2, 1);
+        img.put_pixel(0, 0, image::Rgb([255, 0, 0]));
+        img.put_pixel(1, 0, image::Rgb([128, 128, 128]));
+        img.save(dir.path().join("tex.png")).unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["meshes"] = json!([{"primitives": [
+            {"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 3, "material": 0},
+            {"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 3, "material": 1}
+        ]}]);
+        doc["materials"] = json!([
+            {"pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform":
+                    {"offset": [0.5, 0.0], "rotation": 0.25, "scale": [2.0, 3.0]}}},
+                "metallicRoughnessTexture": {"index": 1}},
+             "emissiveFactor": [1, 1, 1],
+             "emissiveTexture": {"index": 0}},
+            {"pbrMetallicRoughness": {"baseColorTexture": {"index": 1, "texCoord": 1}}}
+        ]);
+        doc["textures"] = json!([{"source": 0}, {"source": 0}]);
+        doc["images"] = json!([{"uri": "tex.png"}]);
+        let scene = load(&write(dir.path(), "textured.gltf", &doc)).unwrap();
+        let m0 = &scene.objects[0].material;
+        let m1 = &scene.objects[1].material;
+        let image_of = |t: &Option<Texture>| match t {
+            Some(Texture::Image { image, transform }) => (image.clone(), *transform),
+            other => panic!("expected an image texture, got {other:?}"),
+        };
+        let (base, transform) = image_of(&m0.base_color_texture);
+        assert_eq!((base.width, base.height), (2, 1));
+        assert!(close(base.texels[0], Vec3::X));
+        assert!(close(
+            base.texels[1],
+            Vec3::splat(srgb_to_linear(128.0 / 255.0))
+        ));
+        assert!((base.texels[1].x - 0.2158605).abs() < 1e-4);
+        assert_eq!(transform.offset, Vec2::new(0.5, 0.0));
+        assert_eq!(transform.rotation, 0.25);
+        assert_eq!(transform.scale, Vec2::new(2.0, 3.0));
+        let (mr, _) = image_of(&m0.metallic_roughness.as_ref().unwrap().texture);
+        assert!(close(mr.texels[1], Vec3::splat(128.0 / 255.0)));
+        let (emissive, _) = image_of(&m0.emission_texture);
+        assert!(Arc::ptr_eq(&base, &emissive));
+        let (other, _) = image_of(&m1.base_color_texture);
+        assert!(Arc::ptr_eq(&base, &other));
+    }
+
+    #[test]
+    fn glb_strips_fans_points_and_sparse() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(json!({"byteLength": BUFFER_LEN}));
+        doc["meshes"] = json!([{"primitives": [
+            {"attributes": {"POSITION": 0}, "mode": 5},
+            {"attributes": {"POSITION": 0}, "mode": 6},
+            {"attributes": {"POSITION": 0}, "mode": 0},
+            {"attributes": {"POSITION": 0}, "mode": 1},
+            {"attributes": {"POSITION": 4}, "indices": 3}
+        ]}]);
+        let path = dir.path().join("modes.glb");
+        std::fs::write(&path, glb(&doc, &quad_buffer(QUAD))).unwrap();
+        let scene = load(&path).unwrap();
+        assert_eq!(scene.objects.len(), 3);
+        assert_eq!(mesh_of(&scene.objects[0]).triangle_count(), 2);
+        assert_eq!(mesh_of(&scene.objects[1]).triangle_count(), 2);
+        let sparse = mesh_of(&scene.objects[2]);
+        assert_eq!(sparse.positions()[2], Vec3A::splat(5.0));
+        assert_eq!(sparse.positions()[1], Vec3A::X);
+    }
+
+    #[test]
+    fn no_scene_uses_root_nodes() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc.as_object_mut().unwrap().remove("scenes");
+        doc["nodes"] = json!([{"children": [1]}, {"mesh": 0}, {"mesh": 0}]);
+        let scene = load(&write(dir.path(), "noscene.gltf", &doc)).unwrap();
+        assert_eq!(scene.objects.len(), 2);
+    }
+
+    #[test]
+    fn malformed_json_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.gltf");
+        std::fs::write(&path, b"{\"asset\": {\"version\": \"2.0\"").unwrap();
+        let message = error_of(&path);
+        assert!(message.contains("cannot parse glTF JSON"), "{message}");
+
+        std::fs::write(&path, b"").unwrap();
+        error_of(&path);
+        let message = error_of(&dir.path().join("absent.gltf"));
+        assert!(message.contains("cannot read file"), "{message}");
+    }
+
+    #[test]
+    fn truncated_glb_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let doc = quad_doc(json!({"byteLength": BUFFER_LEN}));
+        let bytes = glb(&doc, &quad_buffer(QUAD));
+        let path = dir.path().join("t.glb");
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        let message = error_of(&path);
+        assert!(message.contains("truncated GLB"), "{message}");
+        std::fs::write(&path, &bytes[..7]).unwrap();
+        assert!(error_of(&path).contains("truncated GLB"));
+        let mut short = bytes.clone();
+        short[8..12].copy_from_slice(&4u32.to_le_bytes());
+        std::fs::write(&path, &short).unwrap();
+        assert!(error_of(&path).contains("invalid GLB header"));
+        // A GLB without its BIN chunk.
+        let mut no_bin = glb(&doc, &[]);
+        let json_end = 20 + u32::from_le_bytes(no_bin[12..16].try_into().unwrap()) as usize;
+        no_bin.truncate(json_end);
+        let len = no_bin.len() as u32;
+        no_bin[8..12].copy_from_slice(&len.to_le_bytes());
+        std::fs::write(&path, &no_bin).unwrap();
+        let message = error_of(&path);
+        assert!(message.contains("binary chunk"), "{message}");
+    }
+
+    #[test]
+    fn corrupted_glb_never_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        let doc = quad_doc(json!({"byteLength": BUFFER_LEN}));
+        let bytes = glb(&doc, &quad_buffer(QUAD));
+        let path = dir.path().join("c.glb");
+        for len in 0..bytes.len() {
+            std::fs::write(&path, &bytes[..len]).unwrap();
+            assert!(load(&path).is_err(), "prefix of {len} bytes loaded");
+        }
+        // Change every digit of the JSON chunk (counts, offsets, indices,
+        // lengths) and every byte of the file.
+        let json_end = 20 + u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        for i in 20..json_end {
+            if bytes[i].is_ascii_digit() {
+                for digit in [b'0', b'9'] {
+                    let mut corrupt = bytes.clone();
+                    corrupt[i] = digit;
+                    std::fs::write(&path, &corrupt).unwrap();
+                    let _ = load(&path);
+                }
+            }
+        }
+        for i in 0..bytes.len() {
+            for value in [0x00, 0xff, 0x7f] {
+                let mut corrupt = bytes.clone();
+                corrupt[i] = value;
+                std::fs::write(&path, &corrupt).unwrap();
+                let _ = load(&path);
+            }
+        }
+    }
+
+    #[test]
+    fn missing_files_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let doc = quad_doc(json!({"byteLength": BUFFER_LEN, "uri": "missing.bin"}));
+        let message = error_of(&write(dir.path(), "nobuf.gltf", &doc));
+        assert!(
+            message.contains("cannot read buffer 'missing.bin'"),
+            "{message}"
+        );
+
+        // A buffer file that is too short.
+        std::fs::write(dir.path().join("short.bin"), [0u8; 10]).unwrap();
+        let doc = quad_doc(json!({"byteLength": BUFFER_LEN, "uri": "short.bin"}));
+        let message = error_of(&write(dir.path(), "shortbuf.gltf", &doc));
+        assert!(
+            message.contains("short.bin") && message.contains("10 bytes"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["meshes"][0]["primitives"][0]["material"] = json!(0);
+        doc["materials"] = json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
+        doc["textures"] = json!([{"source": 0}]);
+        doc["images"] = json!([{"uri": "nope.png"}]);
+        let message = error_of(&write(dir.path(), "notex.gltf", &doc));
+        assert!(
+            message.contains("cannot read image 'nope.png'"),
+            "{message}"
+        );
+
+        // A texture that is not an image.
+        std::fs::write(dir.path().join("junk.png"), b"not a png").unwrap();
+        doc["images"] = json!([{"uri": "junk.png"}]);
+        let message = error_of(&write(dir.path(), "junktex.gltf", &doc));
+        assert!(
+            message.contains("cannot decode image 'junk.png'"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn node_cycles_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([
+            {"name": "a", "children": [1]},
+            {"name": "b", "mesh": 0, "children": [0]}
+        ]);
+        let message = error_of(&write(dir.path(), "cycle.gltf", &doc));
+        assert!(
+            message.contains("cycle") && message.contains("'a'"),
+            "{message}"
+        );
+        doc["nodes"] = json!([{"name": "self", "children": [0]}]);
+        let message = error_of(&write(dir.path(), "self.gltf", &doc));
+        assert!(
+            message.contains("cycle") && message.contains("'self'"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn deep_hierarchy_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        let nodes: Vec<Value> = (0..MAX_DEPTH + 5)
+            .map(|i| json!({"children": [i + 1]}))
+            .chain([json!({"mesh": 0})])
+            .collect();
+        doc["nodes"] = Value::Array(nodes);
+        let message = error_of(&write(dir.path(), "deep.gltf", &doc));
+        assert!(message.contains("deeper than"), "{message}");
+    }
+
+    #[test]
+    fn bad_indices_and_accessors_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let doc = quad_doc(embedded([0, 1, 2, 0, 2, 7]));
+        let message = error_of(&write(dir.path(), "index.gltf", &doc));
+        assert!(
+            message.contains("mesh 'quad' primitive 0") && message.contains("vertex index 7"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(9);
+        let message = error_of(&write(dir.path(), "accessor.gltf", &doc));
+        assert!(message.contains("accessor 9"), "{message}");
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["meshes"][0]["primitives"][0]["indices"] = json!(9);
+        let message = error_of(&write(dir.path(), "indices.gltf", &doc));
+        assert!(message.contains("invalid glTF"), "{message}");
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["accessors"][3]["count"] = json!(60);
+        let message = error_of(&write(dir.path(), "long.gltf", &doc));
+        assert!(
+            message.contains("indices") && message.contains("buffer view 3"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["accessors"][0]["count"] = json!(u64::MAX / 2);
+        error_of(&write(dir.path(), "huge.gltf", &doc));
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["bufferViews"][0]["byteLength"] = json!(100000);
+        let message = error_of(&write(dir.path(), "view.gltf", &doc));
+        assert!(message.contains("exceeds its buffer"), "{message}");
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["accessors"][0]["type"] = json!("VEC2");
+        let message = error_of(&write(dir.path(), "type.gltf", &doc));
+        assert!(message.contains("POSITION"), "{message}");
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["accessors"][4]["sparse"]["count"] = json!(0);
+        doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(4);
+        load(&write(dir.path(), "sparse0.gltf", &doc)).unwrap();
+        doc["accessors"][4]["sparse"]["count"] = json!(3);
+        error_of(&write(dir.path(), "sparse3.gltf", &doc));
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+        doc["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
+        let message = error_of(&write(dir.path(), "draco.gltf", &doc));
+        assert!(message.contains("KHR_draco_mesh_compression"), "{message}");
+    }
+
+    #[test]
+    fn invalid_numbers_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"name": "far", "mesh": 0, "translation": [1e39, 0, 0]}]);
+        let message = error_of(&write(dir.path(), "inf.gltf", &doc));
+        assert!(
+            message.contains("'far'") && message.contains("finite"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"name": "big", "scale": [1e30, 1e30, 1e30], "children": [1]},
+                              {"mesh": 0, "scale": [1e30, 1e30, 1e30]}]);
+        let message = error_of(&write(dir.path(), "overflow.gltf", &doc));
+        assert!(
+            message.contains("node 1") && message.contains("finite"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"mesh": 0, "rotation": [0, 0, 0, 0]}]);
+        let message = error_of(&write(dir.path(), "quat.gltf", &doc));
+        assert!(
+            message.contains("node 0") && message.contains("quaternion"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] =
+            json!([{"mesh": 0, "matrix": [2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 1, 2, 3, 1]}]);
+        let scene = load(&write(dir.path(), "matrix.gltf", &doc)).unwrap();
+        let t = scene.objects[0].transform.0;
+        assert!(close(t.transform_point3(Vec3::X), Vec3::new(3.0, 2.0, 3.0)));
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["meshes"][0]["primitives"][0]["material"] = json!(0);
+        doc["materials"] = json!([{"name": "hot", "emissiveFactor": [1, 1, 1],
+            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -2.0}}}]);
+        let message = error_of(&write(dir.path(), "strength.gltf", &doc));
+        assert!(
+            message.contains("'hot'") && message.contains("negative"),
+            "{message}"
+        );
+
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"camera": 0}]);
+        doc["cameras"] =
+            json!([{"type": "perspective", "perspective": {"yfov": 4.0, "znear": 0.1}}]);
+        let message = error_of(&write(dir.path(), "fov.gltf", &doc));
+        assert!(message.contains("yfov"), "{message}");
+
+        // Coordinates so large that BVH costs would overflow.
+        let mut far = quad_buffer(QUAD);
+        far[0..4].copy_from_slice(&1.0e20f32.to_le_bytes());
+        let mut doc = quad_doc(json!({"byteLength": BUFFER_LEN,
+            "uri": format!("data:application/octet-stream;base64,{}", b64(&far))}));
+        doc["accessors"][0]["max"] = json!([1e20, 1, 0]);
+        let message = error_of(&write(dir.path(), "farvertex.gltf", &doc));
+        assert!(message.contains("vertex 0 position"), "{message}");
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"name": "giant", "mesh": 0, "scale": [1e16, 1, 1]}]);
+        let message = error_of(&write(dir.path(), "giant.gltf", &doc));
+        assert!(
+            message.contains("'giant'") && message.contains("farther"),
+            "{message}"
+        );
+
+        // Orthographic cameras and zero-scale nodes are skipped, not errors.
+        let mut doc = quad_doc(embedded(QUAD));
+        doc["nodes"] = json!([{"camera": 0}, {"mesh": 0, "scale": [0, 0, 0]}]);
+        doc["scenes"] = json!([{"nodes": [0, 1]}]);
+        doc["cameras"] = json!([{"type": "orthographic",
+            "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.1, "zfar": 10}}]);
+        let scene = load(&write(dir.path(), "ortho.gltf", &doc)).unwrap();
+        assert!(scene.cameras.is_empty() && scene.objects.is_empty());
+    }
+
+    #[test]
+    fn uri_helpers() {
+        assert_eq!(base64_decode("aGVsbG8=").unwrap(), b"hello");
+        assert_eq!(base64_decode("aGVsbG8").unwrap(), b"hello");
+        assert!(base64_decode("a$b").is_err());
+        assert_eq!(percent_decode_str("a%20b.bin").unwrap(), "a b.bin");
+        assert!(percent_decode_str("%FF").is_err());
+        assert!(percent_decode_str("%4").is_err());
+        assert!(has_scheme("http://x") && !has_scheme("dir/file.bin") && !has_scheme("C:x"));
+        assert_eq!(b64(b"hello"), "aGVsbG8=");
+    }
+
+    #[test]
+    fn samples_load() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/samples");
+        if !root.is_dir() {
+            println!("skipped: ../shared/samples not found");
+            return;
+        }
+        let triangles = |scene: &SceneDesc| -> usize {
+            scene
+                .objects
+                .iter()
+                .map(|o| mesh_of(o).triangle_count())
+                .sum()
+        };
+        for (file, expected) in [
+            ("Box/glTF/Box.gltf", 12),
+            ("Box/glTF-Binary/Box.glb", 12),
+            ("BoxTextured/glTF/BoxTextured.gltf", 12),
+            ("Avocado/glTF/Avocado.gltf", 682),
+            ("CornellBox/CornellBox.glb", 36),
+            ("EmissiveStrengthTest/glTF/EmissiveStrengthTest.gltf", 90),
+            ("DamagedHelmet/glTF/DamagedHelmet.gltf", 15452),
+        ] {
+            let path = root.join(file);
+            let scene = load(&path).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(triangles(&scene), expected, "{file}");
+            let emissive = scene
+                .objects
+                .iter()
+                .any(|o| o.material.emission.max_element() > 0.0);
+            match file {
+                "CornellBox/CornellBox.glb" | "DamagedHelmet/glTF/DamagedHelmet.gltf" => {
+                    assert!(emissive, "{file} has no emissive material")
+                }
+                "EmissiveStrengthTest/glTF/EmissiveStrengthTest.gltf" => assert!(
+                    scene
+                        .objects
+                        .iter()
+                        .any(|o| o.material.emission.max_element() > 1.0),
+                    "emissive strength not applied"
+                ),
+                "BoxTextured/glTF/BoxTextured.gltf" | "Avocado/glTF/Avocado.gltf" => assert!(
+                    scene
+                        .objects
+                        .iter()
+                        .all(|o| o.material.base_color_texture.is_some()),
+                    "{file}: texture missing"
+                ),
+                _ => {}
+            }
+        }
+    }
+}

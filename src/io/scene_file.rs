@@ -1,0 +1,736 @@
+//! The project's own scene format: TOML, read through serde.
+//!
+//! It says what glTF cannot: analytic shapes and quadrics, Phong-style
+//! materials, procedural textures and render settings; it can include
+//! glTF files. The schema is documented in the README ("Scene format");
+//! unknown keys are errors, so typos do not pass silently. Relative file
+//! paths are relative to the scene file.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{Quat, Vec3};
+use serde::Deserialize;
+
+use crate::core::error::{Error, Result};
+use crate::core::math::Color;
+use crate::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
+use crate::geometry::shapes::Shape;
+use crate::geometry::transform::Transform;
+use crate::image::output::srgb_to_linear;
+use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc, SettingsDesc};
+use crate::scene::camera::Camera;
+use crate::scene::light::Light;
+use crate::scene::material::{ImageTexture, Material, Texture, UvTransform};
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FileScene {
+    #[serde(default)]
+    settings: FileSettings,
+    camera: Option<FileCamera>,
+    #[serde(default)]
+    materials: BTreeMap<String, FileMaterial>,
+    #[serde(default)]
+    objects: Vec<FileObject>,
+    #[serde(default)]
+    lights: Vec<FileLight>,
+    #[serde(default)]
+    gltf: Vec<FileInclude>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FileSettings {
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    min_contribution: Option<f32>,
+    seed: Option<u64>,
+    exposure: Option<f32>,
+    background: Option<[f32; 3]>,
+    transport: Option<FileTransport>,
+    light_samples: Option<u32>,
+    /// Russian roulette start depth; `false` turns it off.
+    russian_roulette: Option<FileRoulette>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileTransport {
+    Whitted,
+    Path,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum FileRoulette {
+    Enabled(bool),
+    StartDepth(u32),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileCamera {
+    look_from: [f32; 3],
+    look_at: [f32; 3],
+    #[serde(default = "default_up")]
+    up: [f32; 3],
+    #[serde(default = "default_vfov")]
+    vfov: f32,
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_vfov() -> f32 {
+    40.0
+}
+
+/// A colour given as one number (grey) or as `[r, g, b]`.
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum FileColor {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl FileColor {
+    fn get(self) -> Color {
+        match self {
+            FileColor::Grey(g) => Color::splat(g),
+            FileColor::Rgb(c) => Color::from(c),
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "lowercase")]
+enum FileTexture {
+    Checker {
+        #[serde(default = "one")]
+        scale: f32,
+        even: FileColor,
+        odd: FileColor,
+    },
+    Image {
+        path: PathBuf,
+    },
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FileMaterial {
+    color: Option<FileColor>,
+    texture: Option<FileTexture>,
+    diffuse: Option<f32>,
+    specular: Option<FileColor>,
+    shininess: Option<f32>,
+    mirror: Option<FileColor>,
+    transmission: Option<f32>,
+    ior: Option<f32>,
+    emission: Option<FileColor>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum MaterialRef {
+    Named(String),
+    Inline(Box<FileMaterial>),
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+enum FileShape {
+    Sphere {
+        radius: f32,
+    },
+    Plane,
+    Disk {
+        radius: f32,
+    },
+    Polygon {
+        vertices: Vec<[f32; 3]>,
+    },
+    Cylinder {
+        radius: f32,
+        y_min: f32,
+        y_max: f32,
+    },
+    Cone {
+        radius: f32,
+        height: f32,
+    },
+    Ellipsoid {
+        radii: [f32; 3],
+    },
+    Paraboloid {
+        radius: f32,
+        height: f32,
+    },
+    Hyperboloid {
+        waist_radius: f32,
+        top_radius: f32,
+        half_height: f32,
+    },
+    Mesh {
+        positions: Vec<[f32; 3]>,
+        indices: Vec<[u32; 3]>,
+        #[serde(default)]
+        smooth: bool,
+    },
+    #[serde(rename = "torus_knot")]
+    TorusKnot {
+        #[serde(default = "knot_p")]
+        p: u32,
+        #[serde(default = "knot_q")]
+        q: u32,
+        radius: f32,
+        tube: f32,
+        segments: u32,
+        sides: u32,
+        #[serde(default = "yes")]
+        smooth: bool,
+    },
+}
+
+/// Largest `settings.max_depth` a scene file may ask for.
+const MAX_DEPTH_SETTING: u32 = 1024;
+
+/// Most vertices a `torus_knot` may have (about 8 million triangles).
+const MAX_KNOT_VERTICES: u64 = 4_000_000;
+
+fn knot_p() -> u32 {
+    2
+}
+fn knot_q() -> u32 {
+    3
+}
+fn yes() -> bool {
+    true
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FilePlacement {
+    translate: Option<[f32; 3]>,
+    /// Degrees about X, then Y, then Z.
+    rotate: Option<[f32; 3]>,
+    scale: Option<FileColor>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileObject {
+    name: Option<String>,
+    shape: FileShape,
+    material: Option<MaterialRef>,
+    #[serde(flatten)]
+    placement: FilePlacement,
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+enum FileLight {
+    Point {
+        position: [f32; 3],
+        #[serde(default = "white")]
+        color: FileColor,
+        intensity: f32,
+    },
+    Directional {
+        direction: [f32; 3],
+        #[serde(default = "white")]
+        color: FileColor,
+        illuminance: f32,
+    },
+    Spot {
+        position: [f32; 3],
+        direction: [f32; 3],
+        #[serde(default = "white")]
+        color: FileColor,
+        intensity: f32,
+        #[serde(default)]
+        inner_angle: f32,
+        #[serde(default = "default_outer")]
+        outer_angle: f32,
+    },
+}
+
+fn white() -> FileColor {
+    FileColor::Grey(1.0)
+}
+fn default_outer() -> f32 {
+    45.0
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileInclude {
+    path: PathBuf,
+    #[serde(flatten)]
+    placement: FilePlacement,
+}
+
+/// Loads a TOML scene file (see the README for the schema).
+pub fn load_scene_file(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+    let bytes = crate::io::read_regular_file(path)
+        .map_err(|e| Error::load(path, format!("cannot read scene file: {e}")))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| Error::load(path, "cannot read scene file: it is not valid UTF-8"))?;
+    parse_scene_file(&text, path, quality)
+}
+
+/// Parses the text of a TOML scene file. `path` names the file in messages
+/// and its folder is where relative paths (textures, included glTF files)
+/// are looked up; it is not read itself. This is the entry point of the
+/// scene-format fuzz target (`fuzz/`).
+pub fn parse_scene_file(text: &str, path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+    let file: FileScene =
+        toml::from_str(text).map_err(|e| Error::load(path, format!("invalid scene file: {e}")))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let ctx = Ctx {
+        path,
+        base,
+        quality,
+    };
+    ctx.build(file)
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    base: &'a Path,
+    quality: BuildQuality,
+}
+
+fn finite3(what: &str, v: [f32; 3]) -> std::result::Result<Vec3, String> {
+    let v = Vec3::from(v);
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be finite, got {v}"))
+    }
+}
+
+fn non_negative(what: &str, c: Color) -> std::result::Result<Color, String> {
+    if c.is_finite() && c.min_element() >= 0.0 {
+        Ok(c)
+    } else {
+        Err(format!("{what} must be finite and non-negative, got {c}"))
+    }
+}
+
+fn unit_interval(what: &str, v: f32) -> std::result::Result<f32, String> {
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be in [0, 1], got {v}"))
+    }
+}
+
+impl Ctx<'_> {
+    fn err(&self, msg: impl Into<String>) -> Error {
+        Error::load(self.path, msg.into())
+    }
+
+    fn build(&self, file: FileScene) -> Result<SceneDesc> {
+        let mut scene = SceneDesc {
+            settings: self.settings(&file.settings)?,
+            ..Default::default()
+        };
+        if let Some(bg) = file.settings.background {
+            scene.background =
+                non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
+        }
+        if let Some(c) = &file.camera {
+            scene.cameras.push(self.camera(c).map_err(|m| self.err(m))?);
+        }
+        let mut materials = BTreeMap::new();
+        for (name, m) in &file.materials {
+            let mat = self
+                .material(m)
+                .map_err(|msg| self.err(format!("materials.{name}: {msg}")))?;
+            materials.insert(name.clone(), mat);
+        }
+        for (i, o) in file.objects.iter().enumerate() {
+            let label = match &o.name {
+                Some(n) => format!("objects[{i}] ({n})"),
+                None => format!("objects[{i}]"),
+            };
+            let obj = self
+                .object(o, &materials)
+                .map_err(|msg| self.err(format!("{label}: {msg}")))?;
+            scene.objects.push(obj);
+        }
+        for (i, l) in file.lights.iter().enumerate() {
+            let light = self
+                .light(l)
+                .map_err(|msg| self.err(format!("lights[{i}]: {msg}")))?;
+            scene.lights.push(light);
+        }
+        for (i, inc) in file.gltf.iter().enumerate() {
+            let place = self
+                .placement(&inc.placement)
+                .map_err(|msg| self.err(format!("gltf[{i}]: {msg}")))?;
+            let mut sub = crate::io::gltf::load_gltf(&self.base.join(&inc.path), self.quality)
+                .map_err(|e| self.err(format!("gltf[{i}]: {e}")))?;
+            for o in &mut sub.objects {
+                o.transform = Transform(place.0 * o.transform.0);
+            }
+            for l in &mut sub.lights {
+                l.transform = Transform(place.0 * l.transform.0);
+            }
+            for c in &mut sub.cameras {
+                c.look_from = place.0.transform_point3(c.look_from);
+                c.look_at = place.0.transform_point3(c.look_at);
+                c.up = place.0.transform_vector3(c.up);
+            }
+            scene.append(sub);
+        }
+        Ok(scene)
+    }
+
+    fn settings(&self, s: &FileSettings) -> Result<SettingsDesc> {
+        if let Some(m) = s.min_contribution
+            && !(m >= 0.0 && m.is_finite())
+        {
+            return Err(self.err(format!(
+                "settings.min_contribution must be finite and non-negative, got {m}"
+            )));
+        }
+        if let Some(d) = s.max_depth {
+            // The recursive integrator recurses once per bounce: between two
+            // facing perfect mirrors a depth of 20000 overflowed its stack
+            // (an abort, not an error).
+            if d > MAX_DEPTH_SETTING {
+                return Err(self.err(format!(
+                    "settings.max_depth must be at most {MAX_DEPTH_SETTING}, got {d}"
+                )));
+            }
+        }
+        if let Some(e) = s.exposure
+            && !e.is_finite()
+        {
+            return Err(self.err(format!("settings.exposure must be finite, got {e}")));
+        }
+        Ok(SettingsDesc {
+            width: s.width,
+            height: s.height,
+            spp: s.spp,
+            max_depth: s.max_depth,
+            min_contribution: s.min_contribution,
+            seed: s.seed,
+            exposure: s.exposure,
+            transport: s.transport.map(|t| match t {
+                FileTransport::Whitted => crate::integrators::Transport::Whitted,
+                FileTransport::Path => crate::integrators::Transport::Path,
+            }),
+            light_samples: s.light_samples,
+            rr_start_depth: s.russian_roulette.map(|r| match r {
+                FileRoulette::Enabled(true) => Some(crate::integrators::DEFAULT_RR_START_DEPTH),
+                FileRoulette::Enabled(false) => None,
+                FileRoulette::StartDepth(d) => Some(d),
+            }),
+        })
+    }
+
+    fn camera(&self, c: &FileCamera) -> std::result::Result<Camera, String> {
+        let cam = Camera {
+            look_from: finite3("camera.look_from", c.look_from)?,
+            look_at: finite3("camera.look_at", c.look_at)?,
+            up: finite3("camera.up", c.up)?,
+            vfov_degrees: c.vfov,
+            name: None,
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    fn texture(&self, t: &FileTexture) -> std::result::Result<Texture, String> {
+        match t {
+            FileTexture::Checker { scale, even, odd } => {
+                if !(scale.is_finite() && *scale > 0.0) {
+                    return Err(format!("checker scale must be positive, got {scale}"));
+                }
+                Ok(Texture::Checker {
+                    scale: *scale,
+                    even: non_negative("checker even colour", even.get())?,
+                    odd: non_negative("checker odd colour", odd.get())?,
+                })
+            }
+            FileTexture::Image { path } => {
+                let full = self.base.join(path);
+                let bytes = crate::io::read_regular_file(&full)
+                    .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?;
+                let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+                    .with_guessed_format()
+                    .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?
+                    .decode()
+                    .map_err(|e| format!("cannot read texture {}: {e}", full.display()))?
+                    .to_rgb32f();
+                let (width, height) = img.dimensions();
+                let texels = img
+                    .pixels()
+                    .map(|p| Color::new(p[0], p[1], p[2]).map(srgb_to_linear))
+                    .collect();
+                Ok(Texture::Image {
+                    image: Arc::new(ImageTexture {
+                        width,
+                        height,
+                        texels,
+                    }),
+                    transform: UvTransform::default(),
+                })
+            }
+        }
+    }
+
+    fn material(&self, m: &FileMaterial) -> std::result::Result<Material, String> {
+        let d = Material::default();
+        let color = |c: Option<FileColor>, default: Color, what: &str| match c {
+            Some(c) => non_negative(what, c.get()),
+            None => Ok(default),
+        };
+        let shininess = m.shininess.unwrap_or(d.shininess);
+        if !(shininess.is_finite() && shininess >= 1.0) {
+            return Err(format!("shininess must be at least 1, got {shininess}"));
+        }
+        let ior = m.ior.unwrap_or(d.ior);
+        if !(ior.is_finite() && ior > 0.0) {
+            return Err(format!("ior must be a positive finite number, got {ior}"));
+        }
+        Ok(Material {
+            base_color: color(m.color, d.base_color, "color")?,
+            base_color_texture: m.texture.as_ref().map(|t| self.texture(t)).transpose()?,
+            diffuse: unit_interval("diffuse", m.diffuse.unwrap_or(d.diffuse))?,
+            specular: color(m.specular, d.specular, "specular")?,
+            shininess,
+            mirror: color(m.mirror, d.mirror, "mirror")?,
+            transmission: unit_interval("transmission", m.transmission.unwrap_or(0.0))?,
+            ior,
+            emission: color(m.emission, d.emission, "emission")?,
+            ..d
+        })
+    }
+
+    fn placement(&self, p: &FilePlacement) -> std::result::Result<Transform, String> {
+        let t = finite3("translate", p.translate.unwrap_or([0.0; 3]))?;
+        let r = finite3("rotate", p.rotate.unwrap_or([0.0; 3]))?;
+        let s = match p.scale {
+            Some(s) => s.get(),
+            None => Vec3::ONE,
+        };
+        if !s.is_finite() || s.min_element().abs() == 0.0 || s.abs().min_element() < 1e-30 {
+            return Err(format!("scale must be finite and non-zero, got {s}"));
+        }
+        let q = Quat::from_rotation_z(r.z.to_radians())
+            * Quat::from_rotation_y(r.y.to_radians())
+            * Quat::from_rotation_x(r.x.to_radians());
+        let xf = Transform::from_trs(t, q, s);
+        if !xf.is_valid() {
+            return Err("transform is not invertible".into());
+        }
+        Ok(xf)
+    }
+
+    fn object(
+        &self,
+        o: &FileObject,
+        materials: &BTreeMap<String, Material>,
+    ) -> std::result::Result<ObjectDesc, String> {
+        let material = match &o.material {
+            None => Material::default(),
+            Some(MaterialRef::Named(n)) => materials
+                .get(n)
+                .cloned()
+                .ok_or_else(|| format!("unknown material '{n}'"))?,
+            Some(MaterialRef::Inline(m)) => self.material(m)?,
+        };
+        let shape = match &o.shape {
+            FileShape::Sphere { radius } => Shape::Sphere { radius: *radius },
+            FileShape::Plane => Shape::Plane,
+            FileShape::Disk { radius } => Shape::Disk { radius: *radius },
+            FileShape::Polygon { vertices } => Shape::Polygon {
+                vertices: vertices.iter().map(|v| Vec3::from(*v)).collect(),
+            },
+            FileShape::Cylinder {
+                radius,
+                y_min,
+                y_max,
+            } => Shape::Cylinder {
+                radius: *radius,
+                y_min: *y_min,
+                y_max: *y_max,
+            },
+            FileShape::Cone { radius, height } => Shape::Cone {
+                radius: *radius,
+                height: *height,
+            },
+            FileShape::Ellipsoid { radii } => Shape::Ellipsoid {
+                radii: Vec3::from(*radii),
+            },
+            FileShape::Paraboloid { radius, height } => Shape::Paraboloid {
+                radius: *radius,
+                height: *height,
+            },
+            FileShape::Hyperboloid {
+                waist_radius,
+                top_radius,
+                half_height,
+            } => Shape::Hyperboloid {
+                waist_radius: *waist_radius,
+                top_radius: *top_radius,
+                half_height: *half_height,
+            },
+            FileShape::Mesh { .. } | FileShape::TorusKnot { .. } => {
+                let (data, smooth) = match &o.shape {
+                    FileShape::Mesh {
+                        positions,
+                        indices,
+                        smooth,
+                    } => (
+                        MeshData {
+                            positions: positions.iter().map(|p| Vec3::from(*p)).collect(),
+                            indices: indices.clone(),
+                            ..Default::default()
+                        },
+                        smooth,
+                    ),
+                    FileShape::TorusKnot {
+                        p,
+                        q,
+                        radius,
+                        tube,
+                        segments,
+                        sides,
+                        smooth,
+                    } => {
+                        if !(radius.is_finite() && *radius > 0.0 && tube.is_finite() && *tube > 0.0)
+                        {
+                            return Err("torus_knot radius and tube must be positive".into());
+                        }
+                        if !(3..=100_000).contains(segments) || !(3..=1000).contains(sides) {
+                            return Err(format!(
+                                "torus_knot needs 3..=100000 segments and 3..=1000 sides, got {segments} and {sides}"
+                            ));
+                        }
+                        // Each side allows its maximum, but not both: 1e8
+                        // vertices and 2e8 triangles would need tens of GB
+                        // and minutes of BVH build for a few bytes of input.
+                        if *segments as u64 * *sides as u64 > MAX_KNOT_VERTICES {
+                            return Err(format!(
+                                "torus_knot with {segments} segments x {sides} sides has more than {MAX_KNOT_VERTICES} vertices"
+                            ));
+                        }
+                        (
+                            crate::geometry::procedural::torus_knot(
+                                *p, *q, *radius, *tube, *segments, *sides,
+                            ),
+                            smooth,
+                        )
+                    }
+                    _ => unreachable!("matched above"),
+                };
+                let mode = if *smooth {
+                    NormalMode::Smooth
+                } else {
+                    NormalMode::Flat
+                };
+                let name = o.name.clone().unwrap_or_else(|| "mesh".into());
+                let mesh = Mesh::new(name, data, mode, self.quality)?;
+                return Ok(ObjectDesc {
+                    name: o.name.clone(),
+                    transform: self.placement(&o.placement)?,
+                    geometry: Geometry::Mesh(Arc::new(mesh)),
+                    material,
+                });
+            }
+        };
+        shape.validate()?;
+        Ok(ObjectDesc {
+            name: o.name.clone(),
+            transform: self.placement(&o.placement)?,
+            geometry: Geometry::Shape(shape),
+            material,
+        })
+    }
+
+    fn light(&self, l: &FileLight) -> std::result::Result<LightDesc, String> {
+        let intensity = |c: FileColor, i: f32, what: &str| {
+            if !(i.is_finite() && i >= 0.0) {
+                return Err(format!("{what} must be finite and non-negative, got {i}"));
+            }
+            non_negative("color", c.get()).map(|c| c * i)
+        };
+        let aim = |pos: Vec3, dir: [f32; 3]| -> std::result::Result<Transform, String> {
+            let d = finite3("direction", dir)?;
+            if d.length_squared() == 0.0 {
+                return Err("direction must not be zero".into());
+            }
+            let d = d.normalize();
+            // Local -Z onto d.
+            let q = Quat::from_rotation_arc(Vec3::NEG_Z, d);
+            Ok(Transform::from_trs(pos, q, Vec3::ONE))
+        };
+        let (transform, light) = match l {
+            FileLight::Point {
+                position,
+                color,
+                intensity: i,
+            } => (
+                Transform::from_translation(finite3("position", *position)?),
+                Light::Point {
+                    intensity: intensity(*color, *i, "intensity")?,
+                },
+            ),
+            FileLight::Directional {
+                direction,
+                color,
+                illuminance,
+            } => (
+                aim(Vec3::ZERO, *direction)?,
+                Light::Directional {
+                    illuminance: intensity(*color, *illuminance, "illuminance")?,
+                },
+            ),
+            FileLight::Spot {
+                position,
+                direction,
+                color,
+                intensity: i,
+                inner_angle,
+                outer_angle,
+            } => {
+                if !(inner_angle.is_finite()
+                    && outer_angle.is_finite()
+                    && *inner_angle >= 0.0
+                    && inner_angle <= outer_angle
+                    && *outer_angle <= 90.0)
+                {
+                    return Err(format!(
+                        "spot angles need 0 <= inner_angle <= outer_angle <= 90 degrees, got {inner_angle} and {outer_angle}"
+                    ));
+                }
+                (
+                    aim(finite3("position", *position)?, *direction)?,
+                    Light::Spot {
+                        intensity: intensity(*color, *i, "intensity")?,
+                        inner_angle: inner_angle.to_radians(),
+                        outer_angle: outer_angle.to_radians(),
+                    },
+                )
+            }
+        };
+        Ok(LightDesc {
+            name: None,
+            transform,
+            light,
+        })
+    }
+}

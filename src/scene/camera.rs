@@ -1,0 +1,96 @@
+//! Pinhole camera: rays through an image plane.
+
+use bevy_ecs::component::Component;
+use glam::{Vec2, Vec3, Vec3A};
+
+use crate::core::math::Ray;
+
+/// A pinhole camera looking from `look_from` towards `look_at`.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub look_from: Vec3,
+    /// A point the camera looks at.
+    pub look_at: Vec3,
+    /// Approximate up direction (need not be orthogonal to the view).
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub vfov_degrees: f32,
+    /// Optional name (from glTF).
+    pub name: Option<String>,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Self {
+            look_from: Vec3::new(0.0, 0.0, 5.0),
+            look_at: Vec3::ZERO,
+            up: Vec3::Y,
+            vfov_degrees: 40.0,
+            name: None,
+        }
+    }
+}
+
+impl Camera {
+    /// Checks that the camera defines a usable view; the error says why not.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.look_from.is_finite() && self.look_at.is_finite() && self.up.is_finite()) {
+            return Err("camera position, target and up must be finite".into());
+        }
+        let forward = self.look_at - self.look_from;
+        if forward.length_squared() <= 0.0 {
+            return Err("camera look_from and look_at are the same point".into());
+        }
+        if forward.normalize().cross(self.up).length_squared() < 1e-12 {
+            return Err("camera up is parallel to the viewing direction".into());
+        }
+        if !(self.vfov_degrees > 0.0 && self.vfov_degrees < 180.0) {
+            return Err(format!(
+                "camera vertical field of view must be in (0, 180) degrees, got {}",
+                self.vfov_degrees
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A camera prepared for one image size: maps film positions to rays.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRays {
+    origin: Vec3A,
+    /// World-space offset of the image plane's top-left corner (at distance 1).
+    top_left: Vec3A,
+    /// Step per pixel to the right.
+    dx: Vec3A,
+    /// Step per pixel downwards.
+    dy: Vec3A,
+}
+
+impl CameraRays {
+    /// Prepares `camera` for a `width` x `height` image; the aspect ratio is
+    /// the image's. The camera must pass [`Camera::validate`].
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let forward = (camera.look_at - camera.look_from).normalize();
+        let right = forward.cross(camera.up).normalize();
+        let up = right.cross(forward);
+        let half_h = (camera.vfov_degrees.to_radians() * 0.5).tan();
+        let half_w = half_h * width as f32 / height as f32;
+        let top_left = forward - right * half_w + up * half_h;
+        Self {
+            origin: camera.look_from.into(),
+            top_left: top_left.into(),
+            dx: (right * (2.0 * half_w / width as f32)).into(),
+            dy: (-up * (2.0 * half_h / height as f32)).into(),
+        }
+    }
+
+    /// The ray through film position `p` in pixels (`(0,0)` is the top-left
+    /// corner of the image, `(0.5, 0.5)` the centre of the first pixel).
+    /// The direction is unit length.
+    #[inline]
+    pub fn ray(&self, p: Vec2) -> Ray {
+        let d = self.top_left + self.dx * p.x + self.dy * p.y;
+        Ray::new(self.origin, d.normalize())
+    }
+}

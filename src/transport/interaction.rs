@@ -1,0 +1,191 @@
+//! Shading kernels shared by every integrator: the local lighting model,
+//! shadow-ray setup and the specular scattering of the Whitted model.
+//!
+//! They take plain values and return plain values, so the recursive and
+//! the wavefront tracers share the math while keeping their own control
+//! flow.
+
+use std::f32::consts::PI;
+
+use glam::Vec3A;
+
+use crate::core::math::{Color, Ray};
+use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
+use crate::scene::light::{LightSample, WorldLight};
+use crate::scene::material::SurfaceSample;
+use crate::scene::{Hit, RenderScene};
+
+/// Everything shading needs to know about a hit, oriented towards the
+/// viewer.
+#[derive(Clone, Copy, Debug)]
+pub struct Interaction {
+    /// World position.
+    pub point: Vec3A,
+    /// Geometric normal on the viewer's side.
+    pub ng: Vec3A,
+    /// Shading normal on the viewer's side.
+    pub ns: Vec3A,
+    /// Unit direction towards the viewer.
+    pub wo: Vec3A,
+    /// True when the ray arrived on the side the geometric normal points to
+    /// (entering a closed object).
+    pub front_face: bool,
+    /// The material evaluated at the hit.
+    pub surface: SurfaceSample,
+}
+
+impl Interaction {
+    /// Orients the hit towards the incoming ray and evaluates its material.
+    #[inline]
+    pub fn new(scene: &RenderScene, ray: &Ray, hit: &Hit) -> Self {
+        let wo = (-ray.direction).normalize();
+        let front_face = hit.geometric_normal.dot(wo) >= 0.0;
+        let (ng, ns) = if front_face {
+            (hit.geometric_normal, hit.shading_normal)
+        } else {
+            (-hit.geometric_normal, -hit.shading_normal)
+        };
+        Self {
+            point: hit.point,
+            ng,
+            ns,
+            wo,
+            front_face,
+            surface: scene.materials[hit.material as usize].sample(hit.uv),
+        }
+    }
+
+    /// True when the surface has a diffuse or glossy lobe that point lights
+    /// can illuminate.
+    #[inline]
+    pub fn is_lit_by_lights(&self) -> bool {
+        self.surface.diffuse.max_element() > 0.0 || self.surface.specular.max_element() > 0.0
+    }
+}
+
+/// Lambert plus normalised Blinn-Phong: the BRDF of the local model,
+/// `kd/pi + ks (s+8)/(8 pi) (n.h)^s`, times the cosine `n.l`.
+#[inline]
+pub fn brdf_cos(surface: &SurfaceSample, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Color {
+    let cos_i = n.dot(wi);
+    if cos_i <= 0.0 {
+        return Color::ZERO;
+    }
+    let mut f = surface.diffuse * (1.0 / PI);
+    if surface.specular.max_element() > 0.0 {
+        let h = (wo + wi).normalize_or_zero();
+        let cos_h = n.dot(h).max(0.0);
+        let s = surface.shininess;
+        f += surface.specular * ((s + 8.0) / (8.0 * PI) * cos_h.powf(s));
+    }
+    f * cos_i
+}
+
+/// A shadow ray and the radiance it carries if unoccluded.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowQuery {
+    /// Ray from the (offset) surface point towards the light.
+    pub ray: Ray,
+    /// Parameter of the light along the ray (infinite for directional).
+    pub t_max: f32,
+    /// Radiance reflected towards the viewer if the light is visible
+    /// (not yet multiplied by the path throughput).
+    pub radiance: Color,
+}
+
+/// Sets up the shadow ray for one light, or `None` when the light cannot
+/// contribute (below the horizon, outside a spot cone, zero BRDF).
+#[inline]
+pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery> {
+    let LightSample {
+        wi,
+        distance,
+        irradiance,
+    } = light.illuminate(it.point)?;
+    if it.ng.dot(wi) <= 0.0 {
+        return None;
+    }
+    let radiance = brdf_cos(&it.surface, it.ns, it.wo, wi) * irradiance;
+    if !(radiance.max_element() > 0.0) {
+        return None;
+    }
+    let origin = offset_origin_relative(it.point, it.ng);
+    let t_max = if distance.is_finite() {
+        // Distance from the offset origin, shortened by a relative margin
+        // so the light's own position is never counted as a blocker.
+        (it.point + wi * distance - origin).length() * (1.0 - 1e-5)
+    } else {
+        f32::INFINITY
+    };
+    Some(ShadowQuery {
+        ray: Ray::new(origin, wi),
+        t_max,
+        radiance,
+    })
+}
+
+/// Kind of a secondary ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RayKind {
+    /// Primary ray from the camera.
+    Camera,
+    /// Mirror or Fresnel reflection.
+    Reflection,
+    /// Refraction through a dielectric.
+    Refraction,
+}
+
+/// A secondary ray with the weight its radiance is multiplied by.
+#[derive(Clone, Copy, Debug)]
+pub struct Secondary {
+    /// The ray (origin already offset from the surface).
+    pub ray: Ray,
+    /// Multiplier of the radiance it brings back.
+    pub weight: Color,
+    /// Reflection or refraction.
+    pub kind: RayKind,
+}
+
+/// The perfectly specular rays leaving a hit: at most one reflection
+/// (mirror plus the dielectric's Fresnel part, which share a direction)
+/// and one refraction.
+#[inline]
+pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
+    let s = &it.surface;
+    let d = -it.wo;
+    let mut reflect_w = s.mirror;
+    let mut refraction = None;
+    if s.transmission > 0.0 {
+        // Relative index: outside -> inside when entering the front face.
+        let eta = if it.front_face { 1.0 / s.ior } else { s.ior };
+        let cos_i = it.ns.dot(it.wo).max(0.0);
+        let f = fresnel_dielectric(cos_i, eta);
+        reflect_w += Color::splat(s.transmission * f);
+        if f < 1.0
+            && let Some(t) = refract(d, it.ns, eta)
+        {
+            // The refracted ray must leave on the far side of the true surface.
+            if t.dot(it.ng) < 0.0 {
+                refraction = Some(Secondary {
+                    ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
+                    weight: s.transmission_tint * (s.transmission * (1.0 - f)),
+                    kind: RayKind::Refraction,
+                });
+            }
+        }
+    }
+    let reflection = (reflect_w.max_element() > 0.0).then(|| {
+        let mut r = reflect(d, it.ns);
+        if r.dot(it.ng) <= 0.0 {
+            // A shading normal can reflect below the surface; fall back to
+            // the geometric normal.
+            r = reflect(d, it.ng);
+        }
+        Secondary {
+            ray: Ray::new(offset_origin_relative(it.point, it.ng), r),
+            weight: reflect_w,
+            kind: RayKind::Reflection,
+        }
+    });
+    [reflection, refraction]
+}

@@ -1,0 +1,494 @@
+//! Path-tracing kernels shared by both integrators: sampling the surface
+//! model's lobes, next-event estimation of area lights with multiple
+//! importance sampling, the weight of emission found by scattered rays,
+//! and Russian roulette.
+//!
+//! The surface model is the Whitted model's ([`crate::scene::material`]): a
+//! Lambertian lobe, a normalised Blinn-Phong lobe, a perfect mirror and a
+//! smooth dielectric. Path tracing chooses one lobe per bounce, with
+//! probability proportional to its weight, so a path never branches.
+//!
+//! # Random numbers
+//! Every decision reads a fixed dimension of the path's [`Sampler`]:
+//! dimensions 0 and 1 jitter the film position; bounce `b` (the hit of a
+//! ray that has bounced `b` times) owns `stride` dimensions from
+//! `2 + b * stride`, where `stride = 4 + 3 * light_samples`: three per light
+//! sample, then lobe choice, two for the direction, and roulette. Both
+//! integrators therefore draw the same numbers for the same path.
+
+use std::f32::consts::PI;
+
+use glam::{Vec2, Vec3A};
+
+use crate::core::math::{Color, Ray, luminance, max_component, orthonormal_basis};
+use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
+use crate::core::rng::Sampler;
+use crate::integrators::RenderSettings;
+use crate::scene::RenderScene;
+use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos, direct_light};
+
+/// Uniform direction on the unit sphere from two numbers in `[0, 1)`.
+#[inline]
+pub fn uniform_sphere(u: Vec2) -> Vec3A {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3A::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform point on the unit disk (Shirley-Chiu concentric mapping), as
+/// `(x, y)`.
+#[inline]
+pub fn concentric_disk(u: Vec2) -> Vec2 {
+    let o = u * 2.0 - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, PI / 4.0 * (o.y / o.x))
+    } else {
+        (o.y, PI / 2.0 - PI / 4.0 * (o.x / o.y))
+    };
+    Vec2::new(r * theta.cos(), r * theta.sin())
+}
+
+/// Cosine-weighted direction around the unit normal `n`.
+#[inline]
+pub fn cosine_hemisphere(n: Vec3A, u: Vec2) -> Vec3A {
+    let d = concentric_disk(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    let (t, b) = orthonormal_basis(n);
+    (t * d.x + b * d.y + n * z).normalize()
+}
+
+/// The power heuristic (exponent 2) for `a` samples of density `pa`
+/// against `b` samples of density `pb`.
+#[inline]
+pub fn power_heuristic(a: f32, pa: f32, b: f32, pb: f32) -> f32 {
+    let (x, y) = (a * pa, b * pb);
+    let (x2, y2) = (x * x, y * y);
+    if x2 + y2 > 0.0 && (x2 + y2).is_finite() {
+        x2 / (x2 + y2)
+    } else if x > y {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// Probabilities of choosing each lobe of a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LobeChoice {
+    /// Lambertian lobe.
+    pub diffuse: f32,
+    /// Blinn-Phong lobe.
+    pub glossy: f32,
+    /// Perfect mirror.
+    pub mirror: f32,
+    /// Smooth dielectric (Fresnel then picks reflection or refraction).
+    pub dielectric: f32,
+}
+
+impl LobeChoice {
+    /// Proportional to each lobe's weight (luminance of its colour);
+    /// all zero when the surface scatters nothing.
+    pub fn new(it: &Interaction) -> Self {
+        let s = &it.surface;
+        let w = [
+            luminance(s.diffuse).max(0.0),
+            luminance(s.specular).max(0.0),
+            luminance(s.mirror).max(0.0),
+            // The dielectric's reflection is untinted: weigh it by its
+            // transmission alone, so a dark tint still reflects.
+            s.transmission.max(0.0),
+        ];
+        let total: f32 = w.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Self {
+                diffuse: 0.0,
+                glossy: 0.0,
+                mirror: 0.0,
+                dielectric: 0.0,
+            };
+        }
+        Self {
+            diffuse: w[0] / total,
+            glossy: w[1] / total,
+            mirror: w[2] / total,
+            dielectric: w[3] / total,
+        }
+    }
+
+    /// True when a non-specular lobe can be chosen.
+    #[inline]
+    pub fn has_smooth(&self) -> bool {
+        self.diffuse > 0.0 || self.glossy > 0.0
+    }
+}
+
+/// Blinn-Phong half-vector density `(s+1)/(2 pi) (n.h)^s`, converted to
+/// the density of the reflected direction.
+#[inline]
+fn glossy_pdf(it: &Interaction, wi: Vec3A) -> f32 {
+    let h = (it.wo + wi).normalize_or_zero();
+    let cos_h = it.ns.dot(h);
+    let wo_h = it.wo.dot(h);
+    if cos_h <= 0.0 || wo_h <= 0.0 {
+        return 0.0;
+    }
+    let s = it.surface.shininess;
+    (s + 1.0) / (2.0 * PI) * cos_h.powf(s) / (4.0 * wo_h)
+}
+
+/// Density of drawing `wi` with [`sample_bsdf`] through its non-specular
+/// lobes (the specular ones are Dirac and never drawn twice).
+#[inline]
+pub fn bsdf_pdf(it: &Interaction, lobes: &LobeChoice, wi: Vec3A) -> f32 {
+    let mut p = 0.0;
+    if lobes.diffuse > 0.0 {
+        p += lobes.diffuse * it.ns.dot(wi).max(0.0) / PI;
+    }
+    if lobes.glossy > 0.0 {
+        p += lobes.glossy * glossy_pdf(it, wi);
+    }
+    p
+}
+
+/// A direction drawn from the surface's lobes.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    /// The continuation ray (origin offset from the surface).
+    pub ray: Ray,
+    /// BSDF times cosine over density: the throughput multiplier.
+    pub weight: Color,
+    /// Density of the direction for multiple importance sampling; zero
+    /// for specular lobes.
+    pub pdf: f32,
+    /// Reflection or refraction.
+    pub kind: RayKind,
+}
+
+/// Draws the next direction: `u_lobe` chooses the lobe, `u` the direction
+/// within it. `None` when the surface scatters nothing or the direction
+/// falls below the surface.
+pub fn sample_bsdf(
+    it: &Interaction,
+    lobes: &LobeChoice,
+    u_lobe: f32,
+    u: Vec2,
+) -> Option<BsdfSample> {
+    let s = &it.surface;
+    let smooth = lobes.diffuse + lobes.glossy;
+    if u_lobe < smooth {
+        let wi = if u_lobe < lobes.diffuse {
+            cosine_hemisphere(it.ns, u)
+        } else {
+            // Half vector around the shading normal, then reflect.
+            let cos_h = u.x.powf(1.0 / (s.shininess + 1.0));
+            let sin_h = (1.0 - cos_h * cos_h).max(0.0).sqrt();
+            let phi = 2.0 * PI * u.y;
+            let (t, b) = orthonormal_basis(it.ns);
+            let h = t * (sin_h * phi.cos()) + b * (sin_h * phi.sin()) + it.ns * cos_h;
+            reflect(-it.wo, h)
+        };
+        if it.ng.dot(wi) <= 0.0 {
+            return None;
+        }
+        let pdf = bsdf_pdf(it, lobes, wi);
+        let f = brdf_cos(s, it.ns, it.wo, wi);
+        if !(pdf > 0.0) || f == Color::ZERO {
+            return None;
+        }
+        return Some(BsdfSample {
+            ray: Ray::new(offset_origin_relative(it.point, it.ng), wi),
+            weight: f / pdf,
+            pdf,
+            kind: RayKind::Reflection,
+        });
+    }
+    let d = -it.wo;
+    let mirror_dir = || {
+        let r = reflect(d, it.ns);
+        if r.dot(it.ng) <= 0.0 {
+            reflect(d, it.ng)
+        } else {
+            r
+        }
+    };
+    if u_lobe < smooth + lobes.mirror || lobes.dielectric == 0.0 {
+        if lobes.mirror == 0.0 {
+            return None;
+        }
+        return Some(BsdfSample {
+            ray: Ray::new(offset_origin_relative(it.point, it.ng), mirror_dir()),
+            weight: s.mirror / lobes.mirror,
+            pdf: 0.0,
+            kind: RayKind::Reflection,
+        });
+    }
+    // Dielectric: Fresnel decides between reflection and refraction, so
+    // each keeps the weight transmission / P(dielectric).
+    let eta = if it.front_face { 1.0 / s.ior } else { s.ior };
+    let cos_i = it.ns.dot(it.wo).max(0.0);
+    let f = fresnel_dielectric(cos_i, eta);
+    // Reuse the lobe number's position within the dielectric's interval.
+    let u_f = ((u_lobe - smooth - lobes.mirror) / lobes.dielectric).clamp(0.0, 1.0);
+    let base = s.transmission / lobes.dielectric;
+    if u_f >= f
+        && let Some(t) = refract(d, it.ns, eta)
+        && t.dot(it.ng) < 0.0
+    {
+        return Some(BsdfSample {
+            ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
+            weight: s.transmission_tint * base,
+            pdf: 0.0,
+            kind: RayKind::Refraction,
+        });
+    }
+    Some(BsdfSample {
+        ray: Ray::new(offset_origin_relative(it.point, it.ng), mirror_dir()),
+        weight: Color::splat(base),
+        pdf: 0.0,
+        kind: RayKind::Reflection,
+    })
+}
+
+/// First dimension of bounce `depth` in a path's sampler.
+#[inline]
+pub fn bounce_dimension(settings: &RenderSettings, depth: u32) -> u32 {
+    let stride = 4 + 3 * settings.light_samples;
+    2u32.wrapping_add(depth.wrapping_mul(stride))
+}
+
+/// Shadow rays of next-event estimation at a path vertex of bounce
+/// `depth`: one per punctual light that can contribute (as the Whitted
+/// model has them), and `settings.light_samples` samples of the area
+/// lights. Area-light samples are weighted by multiple importance sampling
+/// against the BSDF, except at the last vertex (`depth == max_depth`),
+/// whose BSDF ray is never traced: there they take the full weight. `emit`
+/// receives each query; the radiance is not yet multiplied by the path
+/// throughput.
+pub fn next_event(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    sampler: &mut Sampler,
+    depth: u32,
+    mut emit: impl FnMut(ShadowQuery),
+) {
+    sampler.set_dimension(bounce_dimension(settings, depth));
+    if !it.is_lit_by_lights() {
+        return;
+    }
+    for light in &scene.lights {
+        if let Some(q) = direct_light(it, light) {
+            emit(q);
+        }
+    }
+    if scene.emitters.is_empty() {
+        return;
+    }
+    let n = settings.light_samples;
+    let inv_n = 1.0 / n as f32;
+    for _ in 0..n {
+        let u = sampler.next_f32();
+        let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
+        let Some(ls) = scene
+            .emitters
+            .sample(&scene.instances, &scene.materials, u, v)
+        else {
+            continue;
+        };
+        let to = ls.point - it.point;
+        let dist2 = to.length_squared();
+        if !(dist2 > 0.0 && dist2.is_finite()) {
+            continue;
+        }
+        let dist = dist2.sqrt();
+        let wi = to / dist;
+        let cos_l = ls.normal.dot(wi).abs();
+        if it.ng.dot(wi) <= 0.0 || !(cos_l > 0.0) {
+            continue;
+        }
+        let f = brdf_cos(&it.surface, it.ns, it.wo, wi);
+        if f == Color::ZERO {
+            continue;
+        }
+        let pdf_light = ls.pdf_area * dist2 / cos_l;
+        let w = if depth < settings.max_depth {
+            power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+        } else {
+            1.0
+        };
+        let radiance = f * ls.radiance * (w * inv_n / pdf_light);
+        if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
+            continue;
+        }
+        // End the segment just off the emitter, on the receiver's side, so
+        // the emitter itself never counts as a blocker.
+        let origin = offset_origin_relative(it.point, it.ng);
+        let side = if ls.normal.dot(wi) < 0.0 {
+            ls.normal
+        } else {
+            -ls.normal
+        };
+        let end = offset_origin_relative(ls.point, side);
+        let t_max = (end - origin).dot(wi);
+        if !(t_max > 0.0) {
+            continue;
+        }
+        emit(ShadowQuery {
+            ray: Ray::new(origin, wi),
+            t_max,
+            radiance,
+        });
+    }
+}
+
+/// Emission seen at a hit, weighted against next-event estimation:
+/// `prev_pdf` is the density with which the previous vertex drew this
+/// ray's direction (zero after the camera or a specular lobe: weight 1),
+/// `distance` the ray's length to the hit.
+pub fn emitted(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    instance: u32,
+    prev_pdf: f32,
+    distance: f32,
+) -> Color {
+    let le = it.surface.emission;
+    if le == Color::ZERO || prev_pdf <= 0.0 {
+        return le;
+    }
+    let pdf_area = scene
+        .emitters
+        .pdf_area(&scene.instances, instance, it.point);
+    if pdf_area <= 0.0 {
+        return le;
+    }
+    let cos_l = it.ng.dot(it.wo).abs();
+    if !(cos_l > 0.0) {
+        return Color::ZERO;
+    }
+    let pdf_light = pdf_area * distance * distance / cos_l;
+    le * power_heuristic(1.0, prev_pdf, settings.light_samples as f32, pdf_light)
+}
+
+/// Russian roulette at a path vertex of depth `depth`: `Some(scale)` if
+/// the path goes on, its throughput multiplied by `scale` (at least 1),
+/// `None` if it ends. Survival probability is the throughput's largest
+/// channel, capped at 1.
+#[inline]
+pub fn roulette(settings: &RenderSettings, depth: u32, throughput: Color, u: f32) -> Option<f32> {
+    match settings.rr_start_depth {
+        Some(start) if depth >= start => {
+            let q = max_component(throughput).min(1.0);
+            (q > 0.0 && u < q).then(|| 1.0 / q)
+        }
+        _ => Some(1.0),
+    }
+}
+
+/// What a path vertex produced, for either integrator to route.
+#[derive(Clone, Copy, Debug)]
+pub struct Continuation {
+    /// The next ray and its throughput multiplier and density.
+    pub sample: BsdfSample,
+    /// Roulette scale applied on top of `sample.weight`.
+    pub scale: f32,
+}
+
+/// Chooses how the path continues from a vertex at `depth` whose ray came
+/// with `throughput`: lobe, direction, roulette, depth and contribution
+/// limits. Reads the sampler's lobe, direction and roulette dimensions.
+pub fn continue_path(
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    depth: u32,
+    throughput: Color,
+    sampler: &mut Sampler,
+) -> Option<Continuation> {
+    sampler.set_dimension(bounce_dimension(settings, depth) + 3 * settings.light_samples);
+    let u_lobe = sampler.next_f32();
+    let u = Vec2::new(sampler.next_f32(), sampler.next_f32());
+    let u_rr = sampler.next_f32();
+    if depth >= settings.max_depth {
+        return None;
+    }
+    let sample = sample_bsdf(it, lobes, u_lobe, u)?;
+    let t = throughput * sample.weight;
+    if max_component(t) < settings.min_contribution || !t.is_finite() {
+        return None;
+    }
+    let scale = roulette(settings, depth + 1, t, u_rr)?;
+    Some(Continuation { sample, scale })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn power_heuristic_sums_to_one() {
+        for (pa, pb) in [(1.0, 1.0), (0.3, 2.0), (5.0, 0.0), (0.0, 0.1)] {
+            let a = power_heuristic(2.0, pa, 1.0, pb);
+            let b = power_heuristic(1.0, pb, 2.0, pa);
+            assert!((a + b - 1.0).abs() < 1e-6, "{pa} {pb}: {a} + {b}");
+        }
+    }
+
+    #[test]
+    fn cosine_hemisphere_mean_cosine_is_two_thirds() {
+        // E[cos] under p = cos/pi is 2/3; std of cos under it is
+        // sqrt(1/2 - 4/9) = 0.236, so 5 sigma over n samples is 1.18/sqrt(n).
+        let n = Vec3A::new(0.3, -0.5, 0.8).normalize();
+        let count = 40_000;
+        let mut sum = 0.0f64;
+        for i in 0..count {
+            let mut s = Sampler::new(3, i, 0);
+            let d = cosine_hemisphere(n, Vec2::new(s.next_f32(), s.next_f32()));
+            assert!((d.length() - 1.0).abs() < 1e-5);
+            assert!(d.dot(n) >= -1e-6);
+            sum += d.dot(n) as f64;
+        }
+        let mean = sum / count as f64;
+        assert!(
+            (mean - 2.0 / 3.0).abs() < 1.18 / (count as f64).sqrt(),
+            "{mean}"
+        );
+    }
+
+    #[test]
+    fn uniform_sphere_and_disk_are_on_their_surfaces() {
+        for i in 0..1000 {
+            let mut s = Sampler::new(9, i, 0);
+            let u = Vec2::new(s.next_f32(), s.next_f32());
+            assert!((uniform_sphere(u).length() - 1.0).abs() < 1e-5);
+            assert!(concentric_disk(u).length() <= 1.0 + 1e-6);
+        }
+    }
+
+    #[test]
+    fn roulette_keeps_the_expectation() {
+        let settings = RenderSettings {
+            rr_start_depth: Some(1),
+            ..Default::default()
+        };
+        let t = Color::new(0.3, 0.2, 0.1);
+        let n = 100_000;
+        let mut sum = 0.0f64;
+        for i in 0..n {
+            let u = Sampler::new(1, i, 0).next_f32();
+            if let Some(s) = roulette(&settings, 1, t, u) {
+                sum += s as f64 * 0.3;
+            }
+        }
+        // Each survivor carries 0.3 / 0.3 = 1 with probability 0.3: mean
+        // 0.3, standard error sqrt(0.3 * 0.7 / n) = 1.45e-3; 5 sigma.
+        assert!((sum / n as f64 - 0.3).abs() < 5.0 * 1.45e-3);
+        assert_eq!(roulette(&settings, 0, t, 0.99), Some(1.0));
+    }
+}
