@@ -12,8 +12,9 @@ use std::path::Path;
 
 use bevy_ecs::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
-use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::integrators::IntegratorKind;
 use prism::systems::{self, Frame, RenderConfig};
 
 const W: u32 = 320;
@@ -72,7 +73,7 @@ fn bench_scenes(c: &mut Criterion) {
 /// gated by the scene's features, against the same schedule forced to run
 /// every stage (the extra stages find empty queues).
 fn bench_stage_gating(c: &mut Criterion) {
-    use prism::integrators::Transport;
+    use prism::core::settings::Transport;
     use prism::systems::wavefront::StageGating;
     for transport in [Transport::Whitted, Transport::Path] {
         let mut group = c.benchmark_group(format!("stage_gating/{}", transport.name()));

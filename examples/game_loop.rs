@@ -18,9 +18,10 @@ use bevy_ecs::prelude::*;
 use clap::Parser;
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame as GifFrame, RgbaImage};
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::{PngOptions, to_srgb8};
-use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::integrators::IntegratorKind;
 use prism::systems::demo::{AnimationTime, DemoScene, add_animation};
 use prism::systems::{Frame, PrismPlugin, RenderConfig, run_frame};
 

@@ -36,12 +36,13 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 
 use crate::core::math::Color;
+use crate::core::settings::RenderSettings;
 use crate::geometry::mesh::{BuildQuality, MeshInstance};
 use crate::image::film::Film;
 use crate::integrators::counters::RenderCounters;
 use crate::integrators::progressive::Accumulator;
 use crate::integrators::wavefront::WavefrontReport;
-use crate::integrators::{self, IntegratorKind, RenderSettings};
+use crate::integrators::{self, IntegratorKind};
 use crate::io::desc::{Geometry, SceneDesc};
 use crate::scene::RenderScene;
 use crate::scene::camera::Camera;
@@ -227,7 +228,7 @@ pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
 /// use bevy_ecs::prelude::*;
 /// use glam::Vec3;
 /// use prism::scene::camera::Camera;
-/// use prism::integrators::RenderSettings;
+/// use prism::core::settings::RenderSettings;
 /// use prism::scene::light::Light;
 /// use prism::scene::material::Material;
 /// use prism::geometry::shapes::Shape;

@@ -6,10 +6,11 @@
 //! triangle BVH builds is this file's own.
 
 use bevy_ecs::prelude::*;
+use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
+use prism::integrators::IntegratorKind;
 use prism::integrators::wavefront::StageRuns;
 use prism::integrators::wavefront::queues::QueueBytes;
-use prism::integrators::{IntegratorKind, RenderSettings, Transport};
 use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{HitQueues, ShadowRays, StageGating, StageScratch};
 use prism::systems::{self, Frame, RenderConfig};

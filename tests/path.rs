@@ -6,9 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3, Vec3A};
+use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
-use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::integrators::IntegratorKind;
 use prism::scene::camera::{Camera, CameraRays};
 use prism::systems::{self, RenderConfig};
 

@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use glam::{Quat, Vec2, Vec3, Vec3A};
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
-use prism::integrators::RenderSettings;
 use prism::scene::camera::{Camera, CameraRays};
 use prism::systems::{self, RenderConfig};
 

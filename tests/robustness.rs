@@ -6,9 +6,10 @@
 
 use glam::{Vec2, Vec3, Vec3A};
 use prism::core::math::Color;
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
-use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::integrators::IntegratorKind;
 use prism::scene::material::SurfaceSample;
 use prism::systems::{self, Frame, RenderConfig};
 use prism::transport::interaction::{Interaction, RayKind, scatter};

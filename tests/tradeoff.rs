@@ -5,11 +5,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use glam::Vec3;
+use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::image::metrics;
 use prism::image::output::PngOptions;
-use prism::integrators::{RenderSettings, Transport};
 use prism::systems::{self, RenderConfig};
 
 fn prism() -> Command {

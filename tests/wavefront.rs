@@ -3,9 +3,10 @@
 use std::path::{Path, PathBuf};
 
 use bevy_ecs::prelude::*;
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
-use prism::integrators::{IntegratorKind, RenderSettings};
+use prism::integrators::IntegratorKind;
 use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{
     self, BatchSize, Bounce, CurrentRays, EscapedRays, HitQueues, NextRays, ShadowRays, StartBatch,

@@ -6,3 +6,5 @@ pub mod error;
 pub mod math;
 pub mod optics;
 pub mod rng;
+pub mod sampling;
+pub mod settings;

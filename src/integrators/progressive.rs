@@ -14,10 +14,11 @@
 use rayon::prelude::*;
 
 use crate::core::math::Color;
+use crate::core::settings::{MAX_SPP, RenderSettings};
 use crate::image::film::Film;
 use crate::integrators::counters::RenderCounters;
 use crate::integrators::recursive::pixel_sample;
-use crate::integrators::{MAX_SPP, RenderSettings, accumulate, camera_rays};
+use crate::integrators::{accumulate, camera_rays};
 use crate::scene::RenderScene;
 use crate::scene::camera::Camera;
 

@@ -4,9 +4,10 @@
 
 use rayon::prelude::*;
 
-use super::{Progress, RenderSettings, Transport, accumulate, camera_rays, film_sample};
+use super::{Progress, accumulate, camera_rays, film_sample};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
+use crate::core::settings::{RenderSettings, Transport};
 use crate::image::film::Film;
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;

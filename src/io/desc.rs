@@ -65,7 +65,7 @@ pub struct SettingsDesc {
     /// Exposure in stops for PNG output.
     pub exposure: Option<f32>,
     /// Light transport.
-    pub transport: Option<crate::integrators::Transport>,
+    pub transport: Option<crate::core::settings::Transport>,
     /// Shadow rays per area light per path-traced hit.
     pub light_samples: Option<u32>,
     /// Russian roulette start depth; `Some(None)` turns it off.
@@ -75,9 +75,9 @@ pub struct SettingsDesc {
 impl SettingsDesc {
     /// Render settings from these values, falling back to `under` (the
     /// scene's own settings, say) and then to the defaults.
-    pub fn resolve(&self, under: &SettingsDesc) -> crate::integrators::RenderSettings {
-        let d = crate::integrators::RenderSettings::default();
-        crate::integrators::RenderSettings {
+    pub fn resolve(&self, under: &SettingsDesc) -> crate::core::settings::RenderSettings {
+        let d = crate::core::settings::RenderSettings::default();
+        crate::core::settings::RenderSettings {
             width: self.width.or(under.width).unwrap_or(d.width),
             height: self.height.or(under.height).unwrap_or(d.height),
             spp: self.spp.or(under.spp).unwrap_or(d.spp),

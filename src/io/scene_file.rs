@@ -428,12 +428,12 @@ impl Ctx<'_> {
             seed: s.seed,
             exposure: s.exposure,
             transport: s.transport.map(|t| match t {
-                FileTransport::Whitted => crate::integrators::Transport::Whitted,
-                FileTransport::Path => crate::integrators::Transport::Path,
+                FileTransport::Whitted => crate::core::settings::Transport::Whitted,
+                FileTransport::Path => crate::core::settings::Transport::Path,
             }),
             light_samples: s.light_samples,
             rr_start_depth: s.russian_roulette.map(|r| match r {
-                FileRoulette::Enabled(true) => Some(crate::integrators::DEFAULT_RR_START_DEPTH),
+                FileRoulette::Enabled(true) => Some(crate::core::settings::DEFAULT_RR_START_DEPTH),
                 FileRoulette::Enabled(false) => None,
                 FileRoulette::StartDepth(d) => Some(d),
             }),

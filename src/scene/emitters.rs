@@ -303,12 +303,12 @@ impl EmitterTable {
                 (point, normal, uv)
             }
             EntryGeometry::Sphere { radius } => {
-                let n_o = crate::transport::path::uniform_sphere(v);
+                let n_o = crate::core::sampling::uniform_sphere(v);
                 let point = xf.to_world.transform_point3a(n_o * radius);
                 (point, xf.normal(n_o), Vec2::ZERO)
             }
             EntryGeometry::Disk { radius, .. } => {
-                let d = crate::transport::path::concentric_disk(v) * radius;
+                let d = crate::core::sampling::concentric_disk(v) * radius;
                 let point = xf.to_world.transform_point3a(Vec3A::new(d.x, 0.0, d.y));
                 (point, xf.normal(Vec3A::Y), Vec2::ZERO)
             }

@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use crate::integrators::Transport;
+use crate::core::settings::Transport;
 use crate::scene::light::WorldLight;
 use crate::scene::material::MaterialClass;
 use crate::scene::{InstanceGeometry, RenderScene};

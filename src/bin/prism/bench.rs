@@ -13,10 +13,11 @@ use prism::accel::packet::LANES;
 use prism::core::error::{Error, Result};
 use prism::core::math::{Ray, orthonormal_basis};
 use prism::core::rng::Sampler;
+use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
+use prism::integrators::IntegratorKind;
 use prism::integrators::counters::RayCountsJson;
 use prism::integrators::wavefront::StageSeconds;
-use prism::integrators::{IntegratorKind, RenderSettings};
 use prism::scene::camera::CameraRays;
 use prism::scene::{RenderScene, StreamScratch};
 use prism::systems::{self, Frame, RenderConfig};
@@ -179,8 +180,8 @@ fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<Scene
         spp: args.spp,
         max_depth: args.max_depth,
         transport: args.transport.map(|t| match t {
-            TransportChoice::Whitted => prism::integrators::Transport::Whitted,
-            TransportChoice::Path => prism::integrators::Transport::Path,
+            TransportChoice::Whitted => prism::core::settings::Transport::Whitted,
+            TransportChoice::Path => prism::core::settings::Transport::Path,
         }),
         ..Default::default()
     }

@@ -9,10 +9,11 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use prism::core::error::{Error, Result};
+use prism::core::settings::Transport;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::{OutputFormat, PngOptions, ToneMap};
+use prism::integrators::IntegratorKind;
 use prism::integrators::counters::RenderStats;
-use prism::integrators::{IntegratorKind, Transport};
 use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::{self, Frame, RenderConfig};
 

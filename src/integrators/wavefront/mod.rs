@@ -20,16 +20,17 @@ pub mod queues;
 
 use rayon::prelude::*;
 
-use super::{RenderSettings, Transport, accumulate, film_sample};
 use crate::accel::packet::LANES;
 use crate::core::math::Ray;
 use crate::core::math::{Color, max_component};
 use crate::core::rng::Sampler;
+use crate::core::settings::{RenderSettings, Transport};
 use crate::image::film::Film;
 use crate::integrators::wavefront::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
     ShadowSegments,
 };
+use crate::integrators::{accumulate, film_sample};
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
 use crate::scene::{Hit, InstanceGeometry, RenderScene, StreamScratch};

@@ -15,11 +15,12 @@ use clap::ValueEnum;
 use indicatif::ProgressBar;
 
 use prism::core::error::{Error, Result};
+use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::image::metrics::{self, Metrics};
 use prism::image::output::PngOptions;
-use prism::integrators::{IntegratorKind, RenderSettings, Transport};
+use prism::integrators::IntegratorKind;
 use prism::io::desc::{SceneDesc, SettingsDesc};
 use prism::systems::{self, RenderConfig};
 
@@ -147,7 +148,7 @@ const LIGHT_SAMPLE_VALUES: [u32; 4] = [1, 2, 4, 8];
 const RR_VALUES: [Option<u32>; 3] = [
     None,
     Some(1),
-    Some(prism::integrators::DEFAULT_RR_START_DEPTH),
+    Some(prism::core::settings::DEFAULT_RR_START_DEPTH),
 ];
 const BVH_VALUES: [BuildQuality; 6] = [
     BuildQuality::Fastest,
@@ -427,7 +428,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     .resolve(&base_desc.settings);
     if settings.rr_start_depth.is_none() {
         // A scene that turns roulette off still gets the usual base.
-        settings.rr_start_depth = Some(prism::integrators::DEFAULT_RR_START_DEPTH);
+        settings.rr_start_depth = Some(prism::core::settings::DEFAULT_RR_START_DEPTH);
     }
     let invalid = |what: &str, e: String| {
         Error::Invalid(format!(

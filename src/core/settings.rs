@@ -1,0 +1,146 @@
+//! Render settings shared by every integrator and every transport, with
+//! the limits that keep memory and recursion bounded.
+
+/// Settings shared by every integrator.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Image width in pixels, at least 1.
+    pub width: u32,
+    /// Image height in pixels, at least 1.
+    pub height: u32,
+    /// Samples per pixel, at least 1. One sample goes through the pixel
+    /// centre; more are jittered uniformly over the pixel (box filter).
+    pub spp: u32,
+    /// Maximum number of bounces after the camera ray: specular ones under
+    /// Whitted transport; any under path transport, where the last vertex
+    /// still gathers direct light but scatters no further.
+    pub max_depth: u32,
+    /// Secondary rays whose throughput (largest channel) falls below this
+    /// are not traced.
+    pub min_contribution: f32,
+    /// Seed of the sample keys.
+    pub seed: u64,
+    /// Light transport: Whitted (point lights, specular bounces) or path
+    /// tracing (area lights, diffuse interreflection).
+    pub transport: Transport,
+    /// Shadow rays per area light at each path-traced hit (next-event
+    /// estimation); more gives smoother soft shadows per sample.
+    pub light_samples: u32,
+    /// Path tracing: bounce from which Russian roulette may end paths
+    /// (`None`: never; paths run to `max_depth`).
+    pub rr_start_depth: Option<u32>,
+}
+
+/// How light is transported: the model, orthogonal to the integrator that
+/// executes it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Transport {
+    /// Whitted: direct light from punctual lights, perfect mirror
+    /// reflection and refraction; emissive surfaces glow but light nothing.
+    #[default]
+    Whitted,
+    /// Unidirectional path tracing with next-event estimation and
+    /// multiple importance sampling: emissive surfaces are area lights,
+    /// diffuse surfaces scatter light onwards.
+    Path,
+}
+
+impl Transport {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Transport::Whitted => "whitted",
+            Transport::Path => "path",
+        }
+    }
+}
+
+/// Default bounce from which Russian roulette may end a path: the first
+/// bounces carry most of the image and are always traced.
+pub const DEFAULT_RR_START_DEPTH: u32 = 3;
+
+/// Largest number of light samples per area light accepted.
+pub const MAX_LIGHT_SAMPLES: u32 = 1024;
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 480,
+            spp: 1,
+            max_depth: 8,
+            min_contribution: 1e-3,
+            seed: 0,
+            transport: Transport::Whitted,
+            light_samples: 1,
+            rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
+        }
+    }
+}
+
+/// Largest image side accepted, to keep memory bounded.
+pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
+
+/// Largest number of pixels accepted (2^26, e.g. 8192 x 8192): the film
+/// alone takes 12 bytes per pixel.
+pub const MAX_PIXELS: u64 = 1 << 26;
+
+/// Largest number of samples per pixel accepted.
+pub const MAX_SPP: u32 = 1 << 20;
+
+/// Largest maximum depth accepted: the recursive tracer uses one stack
+/// frame per bounce, and two facing mirrors reach any depth asked for.
+pub const MAX_DEPTH_LIMIT: u32 = 1024;
+
+impl RenderSettings {
+    /// Rejects unusable settings with a message naming the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "image size must be at least 1x1, got {}x{}",
+                self.width, self.height
+            ));
+        }
+        if self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "image size {}x{} exceeds the maximum side of {MAX_IMAGE_SIDE} pixels",
+                self.width, self.height
+            ));
+        }
+        if self.width as u64 * self.height as u64 > MAX_PIXELS {
+            return Err(format!(
+                "image size {}x{} exceeds the maximum of {MAX_PIXELS} pixels",
+                self.width, self.height
+            ));
+        }
+        if self.spp > MAX_SPP {
+            return Err(format!(
+                "samples per pixel {} exceeds the maximum of {MAX_SPP}",
+                self.spp
+            ));
+        }
+        if self.max_depth > MAX_DEPTH_LIMIT {
+            return Err(format!(
+                "max depth {} exceeds the limit of {MAX_DEPTH_LIMIT}",
+                self.max_depth
+            ));
+        }
+        if self.light_samples == 0 || self.light_samples > MAX_LIGHT_SAMPLES {
+            return Err(format!(
+                "light samples must be between 1 and {MAX_LIGHT_SAMPLES}, got {}",
+                self.light_samples
+            ));
+        }
+        if self.spp == 0 {
+            return Err("samples per pixel must be at least 1".into());
+        }
+        if !(self.min_contribution >= 0.0 && self.min_contribution.is_finite()) {
+            return Err(format!(
+                "min contribution must be a finite non-negative number, got {}",
+                self.min_contribution
+            ));
+        }
+        Ok(())
+    }
+}
