@@ -25,28 +25,28 @@
 //! the build short and the binary simple); the kernels in `src/` never
 //! refer to it.
 
+pub mod components;
 pub mod demo;
+pub mod frame;
+pub mod render;
+pub mod renderer;
 pub mod sync;
 pub mod wavefront;
 
-use std::sync::Arc;
-use std::time::Instant;
+pub use components::MeshInstance;
+pub use frame::{
+    AccumulationState, ExtractedScene, Frame, ProgressFn, ProgressiveRendering, RenderConfig,
+    SceneAccel,
+};
+pub use render::{frame_preconditions, integrator_is, render_recursive};
+pub use renderer::Renderer;
 
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
 
-use crate::core::math::Color;
 use crate::core::settings::RenderSettings;
-use crate::geometry::mesh::{BuildQuality, MeshInstance};
-use crate::image::film::Film;
-use crate::integrators::counters::RenderCounters;
-use crate::integrators::progressive::Accumulator;
-use crate::integrators::wavefront::WavefrontReport;
-use crate::integrators::{self, IntegratorKind};
+use crate::integrators::IntegratorKind;
 use crate::io::desc::{Geometry, SceneDesc};
-use crate::scene::RenderScene;
-use crate::scene::camera::Camera;
-use sync::SceneUpdateReport;
 
 /// The stages of a frame, run in this order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
@@ -62,99 +62,6 @@ pub enum PrismSystems {
 /// The schedule Prism's systems run in when used standalone.
 #[derive(ScheduleLabel, Debug, Clone, PartialEq, Eq, Hash)]
 pub struct RenderFrame;
-
-/// Called with the number of image rows finished.
-pub type ProgressFn = Arc<dyn Fn(u64) + Send + Sync>;
-
-/// How frames are rendered.
-#[derive(Resource, Clone)]
-pub struct RenderConfig {
-    /// Image size, samples, depth, threshold, seed.
-    pub settings: RenderSettings,
-    /// Integrator.
-    pub integrator: IntegratorKind,
-    /// Which camera entity to render from; the first camera (lowest
-    /// entity id) when `None`.
-    pub camera: Option<Entity>,
-    /// BVH build preset for the top level.
-    pub bvh_quality: BuildQuality,
-    /// Radiance of escaped rays.
-    pub background: Color,
-    /// Optional progress callback.
-    pub progress: Option<ProgressFn>,
-}
-
-impl Default for RenderConfig {
-    fn default() -> Self {
-        Self {
-            settings: RenderSettings::default(),
-            integrator: IntegratorKind::default(),
-            camera: None,
-            bvh_quality: BuildQuality::default(),
-            background: Color::ZERO,
-            progress: None,
-        }
-    }
-}
-
-/// The camera read from the world this frame, or why the frame cannot be
-/// rendered.
-#[derive(Resource, Default)]
-pub struct ExtractedScene {
-    camera: Option<Camera>,
-    error: Option<String>,
-}
-
-/// The render-ready scene with its BVH. It persists between frames and is
-/// updated in place by the systems of [`sync`].
-#[derive(Resource, Default)]
-pub struct SceneAccel {
-    /// The scene, once built.
-    pub scene: Option<Arc<RenderScene>>,
-    /// Seconds spent updating the top-level BVH this frame.
-    pub build_seconds: f64,
-}
-
-/// Progressive accumulation: while nothing changes (scene, camera,
-/// settings), each frame adds `spp` samples per pixel to the previous
-/// ones, and frame `k` is bit for bit the image of `k * spp` samples (see
-/// [`crate::integrators::progressive`]). Any change starts again from `spp` samples.
-/// Applies to the recursive integrator (Whitted or path transport); the
-/// wavefront renders each frame independently.
-#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ProgressiveRendering {
-    /// Accumulate frames while nothing changes.
-    pub enabled: bool,
-}
-
-/// The running sums of progressive rendering and what they were rendered
-/// with.
-#[derive(Resource, Default)]
-pub struct AccumulationState {
-    accumulator: Accumulator,
-    key: Option<(RenderSettings, Camera, Color)>,
-}
-
-/// The finished frame.
-#[derive(Resource, Default)]
-pub struct Frame {
-    /// The image, or `None` if the frame failed.
-    pub film: Option<Film>,
-    /// Why the frame failed.
-    pub error: Option<String>,
-    /// Rays traced and non-finite samples caught.
-    pub counters: RenderCounters,
-    /// Seconds spent tracing.
-    pub render_seconds: f64,
-    /// Stage times and queue memory, for wavefront frames.
-    pub wavefront: Option<WavefrontReport>,
-    /// What the scene update did this frame, with its timings and BVH
-    /// work counters.
-    pub update: SceneUpdateReport,
-    /// Samples per pixel in the image (more than `spp` when progressive
-    /// frames accumulated).
-    pub samples: u32,
-}
 
 /// Adds Prism's stages to `schedule` in order.
 pub fn add_render_systems(schedule: &mut Schedule) {
@@ -343,114 +250,14 @@ pub fn spawn_scene(world: &mut World, desc: SceneDesc) -> Vec<Entity> {
         .collect()
 }
 
-/// Run condition: the configured integrator is `kind`.
-pub fn integrator_is(kind: IntegratorKind) -> impl Fn(Res<RenderConfig>) -> bool + Clone {
-    move |config: Res<RenderConfig>| config.integrator == kind
-}
-
-/// Checks what every integrator needs before it can trace: a valid
-/// camera, valid settings and a built scene. On failure it records the
-/// reason in [`Frame`] and returns `None`.
-pub fn frame_preconditions(world: &mut World) -> Option<(Arc<RenderScene>, Camera)> {
-    {
-        let mut frame = world.resource_mut::<Frame>();
-        let update = frame.update;
-        *frame = Frame {
-            update,
-            ..Default::default()
-        };
-    }
-    let extracted = world.resource::<ExtractedScene>();
-    let result = (|| {
-        if let Some(e) = &extracted.error {
-            return Err(e.clone());
-        }
-        let camera = extracted
-            .camera
-            .clone()
-            .ok_or_else(|| "the scene has no camera".to_string())?;
-        camera.validate()?;
-        world.resource::<RenderConfig>().settings.validate()?;
-        let scene = world
-            .resource::<SceneAccel>()
-            .scene
-            .clone()
-            .ok_or_else(|| "no acceleration structure was built".to_string())?;
-        Ok((scene, camera))
-    })();
-    match result {
-        Ok(v) => Some(v),
-        Err(e) => {
-            world.resource_mut::<Frame>().error = Some(e);
-            None
-        }
-    }
-}
-
-/// Stage 3, recursive integrator: renders every pixel depth-first.
-pub fn render_recursive(world: &mut World) {
-    let Some((scene, camera)) = frame_preconditions(world) else {
-        return;
-    };
-    let config = world.resource::<RenderConfig>().clone();
-    let progressive = world
-        .get_resource::<ProgressiveRendering>()
-        .is_some_and(|p| p.enabled);
-    if progressive {
-        render_progressive(world, &scene, camera, &config);
-        return;
-    }
-    let start = Instant::now();
-    let progress = config
-        .progress
-        .as_deref()
-        .map(|p| p as integrators::Progress<'_>);
-    let (film, counters) =
-        integrators::recursive::render(&scene, &camera, &config.settings, progress);
-    let mut frame = world.resource_mut::<Frame>();
-    frame.render_seconds = start.elapsed().as_secs_f64();
-    frame.film = Some(film);
-    frame.counters = counters;
-    frame.samples = config.settings.spp;
-}
-
-/// Adds `spp` samples to the running sums, after starting them again if
-/// anything changed: the scene (this frame's update), the camera, the
-/// settings or the background.
-fn render_progressive(
-    world: &mut World,
-    scene: &RenderScene,
-    camera: Camera,
-    config: &RenderConfig,
-) {
-    let changed = world.resource::<Frame>().update.changed();
-    let key = (config.settings.clone(), camera, config.background);
-    let mut state = world.resource_mut::<AccumulationState>();
-    if changed || state.key.as_ref() != Some(&key) {
-        state.accumulator = Accumulator::new(config.settings.width, config.settings.height);
-        state.key = Some(key);
-    }
-    let (settings, camera, _) = state.key.clone().expect("just set");
-    let start = Instant::now();
-    let counters = state.accumulator.add_samples(scene, &camera, &settings);
-    let film = state.accumulator.film();
-    let samples = state.accumulator.samples();
-    if let Some(p) = &config.progress {
-        p(settings.height as u64);
-    }
-    let mut frame = world.resource_mut::<Frame>();
-    frame.render_seconds = start.elapsed().as_secs_f64();
-    frame.film = Some(film);
-    frame.counters = counters;
-    frame.samples = samples;
-}
-
 /// Renders a loaded scene in a fresh world: spawns it, runs one frame and
 /// returns the frame. `camera` indexes the scene's cameras in file order.
+/// The same as [`Renderer::with_scene`] followed by [`Renderer::render`].
 ///
 /// ```no_run
-/// use prism::{loader, mesh::BuildQuality, systems};
-/// let desc = loader::load("assets/whitted.toml".as_ref(), BuildQuality::Medium)?;
+/// use prism::geometry::mesh::BuildQuality;
+/// use prism::systems;
+/// let desc = prism::io::load("assets/whitted.toml".as_ref(), BuildQuality::Medium)?;
 /// let frame = systems::render_scene_desc(desc, systems::RenderConfig::default(), 0)?;
 /// let film = frame.film.expect("rendered");
 /// assert_eq!(film.width, 640);
@@ -458,24 +265,8 @@ fn render_progressive(
 /// ```
 pub fn render_scene_desc(
     desc: SceneDesc,
-    mut config: RenderConfig,
+    config: RenderConfig,
     camera: usize,
 ) -> crate::Result<Frame> {
-    let mut world = World::new();
-    let mut schedule = setup(&mut world);
-    config.background = desc.background;
-    let cameras = spawn_scene(&mut world, desc);
-    config.camera = Some(*cameras.get(camera).ok_or_else(|| {
-        crate::Error::Invalid(format!(
-            "camera {camera} requested but the scene has {} camera(s)",
-            cameras.len()
-        ))
-    })?);
-    world.insert_resource(config);
-    schedule.run(&mut world);
-    let frame = world.remove_resource::<Frame>().unwrap_or_default();
-    match &frame.error {
-        Some(e) => Err(crate::Error::Invalid(e.clone())),
-        None => Ok(frame),
-    }
+    Renderer::with_scene(desc, config, camera)?.render()
 }

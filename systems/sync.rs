@@ -33,9 +33,10 @@ use std::time::Instant;
 
 use bevy_ecs::prelude::*;
 
+use super::components::MeshInstance;
 use super::{ExtractedScene, Frame, RenderConfig, SceneAccel};
 use crate::accel::tlas::{TlasCounters, TlasUpdate};
-use crate::geometry::mesh::{BuildQuality, MeshInstance};
+use crate::geometry::mesh::BuildQuality;
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
 use crate::scene::light::{Light, WorldLight};

@@ -9,7 +9,7 @@ use glam::{Affine3A, Quat, Vec3, Vec3A};
 use prism::accel::tlas::{MoveStrategy, TlasPolicy, TlasUpdate};
 use prism::core::math::{Color, Ray};
 use prism::core::settings::{RenderSettings, Transport};
-use prism::geometry::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode};
+use prism::geometry::mesh::{BuildQuality, Mesh, NormalMode};
 use prism::geometry::shapes::Shape;
 use prism::geometry::transform::Transform;
 use prism::integrators::IntegratorKind;
@@ -17,6 +17,7 @@ use prism::scene::camera::Camera;
 use prism::scene::light::Light;
 use prism::scene::material::Material;
 use prism::scene::{Hit, RenderScene};
+use prism::systems::MeshInstance;
 use prism::systems::sync::{SceneSync, scene_from_scratch};
 use prism::systems::{
     self, Frame, PrismPlugin, ProgressiveRendering, RenderConfig, SceneAccel, run_frame,

@@ -12,12 +12,13 @@ use glam::Vec3;
 use prism::accel::tlas::{TlasCounters, TlasUpdate};
 use prism::core::math::{Color, Ray};
 use prism::core::settings::RenderSettings;
-use prism::geometry::mesh::{BuildQuality, Mesh, MeshInstance, NormalMode, mesh_bvh_builds};
+use prism::geometry::mesh::{BuildQuality, Mesh, NormalMode, mesh_bvh_builds};
 use prism::geometry::shapes::Shape;
 use prism::geometry::transform::Transform;
 use prism::scene::camera::Camera;
 use prism::scene::light::Light;
 use prism::scene::material::Material;
+use prism::systems::MeshInstance;
 use prism::systems::sync::SceneSync;
 use prism::systems::{Frame, PrismPlugin, SceneAccel, run_frame};
 

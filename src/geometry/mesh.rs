@@ -808,7 +808,3 @@ static MESH_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::Atomic
 pub fn mesh_bvh_builds() -> u64 {
     MESH_BVH_BUILDS.load(std::sync::atomic::Ordering::Relaxed)
 }
-
-/// ECS component: the entity is an instance of this shared mesh.
-#[derive(bevy_ecs::component::Component, Clone, Debug)]
-pub struct MeshInstance(pub std::sync::Arc<Mesh>);

@@ -1,0 +1,112 @@
+//! The resources of a frame: what to render ([`RenderConfig`]), what was
+//! extracted and built from the world, progressive accumulation, and the
+//! finished [`Frame`].
+
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+
+use super::sync::SceneUpdateReport;
+use crate::core::math::Color;
+use crate::core::settings::RenderSettings;
+use crate::geometry::mesh::BuildQuality;
+use crate::image::film::Film;
+use crate::integrators::IntegratorKind;
+use crate::integrators::counters::RenderCounters;
+use crate::integrators::progressive::Accumulator;
+use crate::integrators::wavefront::WavefrontReport;
+use crate::scene::RenderScene;
+use crate::scene::camera::Camera;
+
+/// Called with the number of image rows finished.
+pub type ProgressFn = Arc<dyn Fn(u64) + Send + Sync>;
+
+/// How frames are rendered.
+#[derive(Resource, Clone)]
+pub struct RenderConfig {
+    /// Image size, samples, depth, threshold, seed.
+    pub settings: RenderSettings,
+    /// Integrator.
+    pub integrator: IntegratorKind,
+    /// Which camera entity to render from; the first camera (lowest
+    /// entity id) when `None`.
+    pub camera: Option<Entity>,
+    /// BVH build preset for the top level.
+    pub bvh_quality: BuildQuality,
+    /// Radiance of escaped rays.
+    pub background: Color,
+    /// Optional progress callback.
+    pub progress: Option<ProgressFn>,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        Self {
+            settings: RenderSettings::default(),
+            integrator: IntegratorKind::default(),
+            camera: None,
+            bvh_quality: BuildQuality::default(),
+            background: Color::ZERO,
+            progress: None,
+        }
+    }
+}
+
+/// The camera read from the world this frame, or why the frame cannot be
+/// rendered.
+#[derive(Resource, Default)]
+pub struct ExtractedScene {
+    pub(super) camera: Option<Camera>,
+    pub(super) error: Option<String>,
+}
+
+/// The render-ready scene with its BVH. It persists between frames and is
+/// updated in place by the systems of [`sync`].
+#[derive(Resource, Default)]
+pub struct SceneAccel {
+    /// The scene, once built.
+    pub scene: Option<Arc<RenderScene>>,
+    /// Seconds spent updating the top-level BVH this frame.
+    pub build_seconds: f64,
+}
+
+/// Progressive accumulation: while nothing changes (scene, camera,
+/// settings), each frame adds `spp` samples per pixel to the previous
+/// ones, and frame `k` is bit for bit the image of `k * spp` samples (see
+/// [`crate::integrators::progressive`]). Any change starts again from `spp` samples.
+/// Applies to the recursive integrator (Whitted or path transport); the
+/// wavefront renders each frame independently.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ProgressiveRendering {
+    /// Accumulate frames while nothing changes.
+    pub enabled: bool,
+}
+
+/// The running sums of progressive rendering and what they were rendered
+/// with.
+#[derive(Resource, Default)]
+pub struct AccumulationState {
+    pub(super) accumulator: Accumulator,
+    pub(super) key: Option<(RenderSettings, Camera, Color)>,
+}
+
+/// The finished frame.
+#[derive(Resource, Default)]
+pub struct Frame {
+    /// The image, or `None` if the frame failed.
+    pub film: Option<Film>,
+    /// Why the frame failed.
+    pub error: Option<String>,
+    /// Rays traced and non-finite samples caught.
+    pub counters: RenderCounters,
+    /// Seconds spent tracing.
+    pub render_seconds: f64,
+    /// Stage times and queue memory, for wavefront frames.
+    pub wavefront: Option<WavefrontReport>,
+    /// What the scene update did this frame, with its timings and BVH
+    /// work counters.
+    pub update: SceneUpdateReport,
+    /// Samples per pixel in the image (more than `spp` when progressive
+    /// frames accumulated).
+    pub samples: u32,
+}
