@@ -3,6 +3,9 @@
 //! packet and stream traversals that share it, and the top-level BVH over
 //! placements. Knows nothing of what the boxes contain.
 
+pub mod build;
+pub mod node;
 pub mod packet;
+pub mod single;
 pub mod stream;
 pub mod tlas;

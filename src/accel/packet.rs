@@ -11,6 +11,7 @@
 use glam::Vec3A;
 use obvhs::cwbvh::CwBvh;
 
+use crate::accel::node::{DecodedNode, NodeRay, present_children};
 use crate::core::math::Ray;
 
 /// Rays per packet.
@@ -22,20 +23,11 @@ pub type LaneMask = u32;
 /// Every lane of a full packet.
 pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 
-/// Rays in structure-of-arrays form, with their search intervals.
+/// Rays with their search intervals, lane by lane.
 #[derive(Clone, Copy, Debug)]
 pub struct Packet {
-    /// Origins, per axis.
-    pub origin: [[f32; LANES]; 3],
-    /// Reciprocal directions, per axis (0 where the direction component is
-    /// zero or its reciprocal overflows: see `parallel`).
-    pub inv_dir: [[f32; LANES]; 3],
-    /// Per axis, the lanes that do not move along it: their slab test is
-    /// an inside/outside test.
-    pub parallel: [LaneMask; 3],
-    /// Largest coordinate magnitude of any lane's origin (for the box
-    /// margin, see [`crate::geometry::mesh::NODE_MARGIN_EPS`]).
-    pub origin_mag: f32,
+    /// The rays prepared for the node test.
+    node_rays: [NodeRay; LANES],
     /// Interval starts.
     pub t_min: [f32; LANES],
     /// Interval ends; closest-hit traversal shrinks them as hits are found.
@@ -52,15 +44,13 @@ impl Packet {
         debug_assert!(
             rays.len() <= LANES && rays.len() == t_min.len() && rays.len() == t_max.len()
         );
+        let empty = Ray::new(Vec3A::ZERO, Vec3A::X);
         let mut p = Packet {
-            origin: [[0.0; LANES]; 3],
-            inv_dir: [[0.0; LANES]; 3],
-            parallel: [0; 3],
-            origin_mag: 0.0,
+            node_rays: [NodeRay::new(&empty); LANES],
             t_min: [0.0; LANES],
             // Unused lanes can never hit.
             t_max: [f32::NEG_INFINITY; LANES],
-            rays: [Ray::new(Vec3A::ZERO, Vec3A::X); LANES],
+            rays: [empty; LANES],
             valid: 0,
         };
         for (l, r) in rays.iter().enumerate() {
@@ -72,84 +62,30 @@ impl Packet {
     /// Puts ray `r` in lane `l`.
     #[inline]
     pub fn set_lane(&mut self, l: usize, r: Ray, t_min: f32, t_max: f32) {
-        for a in 0..3 {
-            self.origin[a][l] = r.origin[a];
-            let inv = 1.0 / r.direction[a];
-            if inv.is_finite() {
-                self.inv_dir[a][l] = inv;
-                self.parallel[a] &= !(1 << l);
-            } else {
-                self.inv_dir[a][l] = 0.0;
-                self.parallel[a] |= 1 << l;
-            }
-        }
-        self.origin_mag = self.origin_mag.max(r.origin.abs().max_element());
+        self.node_rays[l] = NodeRay::new(&r);
         self.t_min[l] = t_min;
         self.t_max[l] = t_max;
         self.rays[l] = r;
         self.valid |= 1 << l;
     }
 
-    /// Slab test of one box against every lane: the mask of lanes whose
-    /// interval overlaps the box, and the smallest entry distance among them.
+    /// The node test of every lane in `active` against the children of
+    /// `node`: per child, the lanes that enter it and the smallest entry
+    /// distance among them.
     #[inline(always)]
-    fn hit_box(&self, min: Vec3A, max: Vec3A, active: LaneMask) -> (LaneMask, f32) {
-        let mut near = [0.0f32; LANES];
-        let mut far = [0.0f32; LANES];
-        // Plain comparisons (not f32::min/max, whose NaN handling blocks
-        // vectorisation); no NaN can arise: inverse directions are finite.
-        #[inline(always)]
-        fn lo(a: f32, b: f32) -> f32 {
-            if a < b { a } else { b }
-        }
-        #[inline(always)]
-        fn hi(a: f32, b: f32) -> f32 {
-            if a > b { a } else { b }
-        }
-        for l in 0..LANES {
-            let mut t0 = self.t_min[l];
-            let mut t1 = self.t_max[l];
-            for a in 0..3 {
-                let s0 = (min[a] - self.origin[a][l]) * self.inv_dir[a][l];
-                let s1 = (max[a] - self.origin[a][l]) * self.inv_dir[a][l];
-                // A lane parallel to the axis is not limited by its slab
-                // here; the inside test below decides.
-                let open = (self.parallel[a] >> l) & 1 == 1;
-                let (n, f) = if open {
-                    (f32::NEG_INFINITY, f32::INFINITY)
-                } else {
-                    (lo(s0, s1), hi(s0, s1))
-                };
-                t0 = hi(t0, n);
-                t1 = lo(t1, f);
+    fn test_node(&self, node: &DecodedNode, active: LaneMask) -> ([LaneMask; 8], [f32; 8]) {
+        let mut lanes = [0 as LaneMask; 8];
+        let mut near = [f32::INFINITY; 8];
+        for_each_lane(active, |l| {
+            let (mut hits, enter) = node.test(&self.node_rays[l], self.t_min[l], self.t_max[l]);
+            while hits != 0 {
+                let c = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                lanes[c] |= 1 << l;
+                near[c] = near[c].min(enter[c / 4][c % 4]);
             }
-            // The products carry one rounding each: widen by a few ulps.
-            near[l] = t0 - t0.abs() * (4.0 * f32::EPSILON);
-            far[l] = t1 + t1.abs() * (4.0 * f32::EPSILON);
-        }
-        // Lanes that do not move along an axis: inside the slab or never.
-        for a in 0..3 {
-            let mut m = self.parallel[a];
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                let o = self.origin[a][l];
-                if !(min[a] <= o && o <= max[a]) {
-                    near[l] = f32::INFINITY;
-                    far[l] = f32::NEG_INFINITY;
-                }
-            }
-        }
-        let mut mask = 0;
-        let mut nearest = f32::INFINITY;
-        for l in 0..LANES {
-            let hit = near[l] <= far[l];
-            mask |= (hit as LaneMask) << l;
-            if hit && (active >> l) & 1 == 1 {
-                nearest = nearest.min(near[l]);
-            }
-        }
-        (mask & active, nearest)
+        });
+        (lanes, near)
     }
 }
 
@@ -178,12 +114,21 @@ pub fn traverse(
     // Left uninitialised: zeroing 3 KB per traversal cost more than the
     // traversal of a small tree. Only entries below `top` are ever read.
     let mut stack = [const { std::mem::MaybeUninit::<(u32, LaneMask, f32)>::uninit() }; STACK];
+    let mut spill: Vec<(u32, LaneMask, f32)> = Vec::new();
     let mut top = 1;
     stack[0].write((0, alive, f32::NEG_INFINITY));
     while top > 0 && alive != 0 {
         top -= 1;
-        // SAFETY: every entry below `top` was written before `top` passed it.
-        let (index, lanes, near) = unsafe { stack[top].assume_init() };
+        let (index, lanes, near) = if top >= STACK {
+            spill.pop().expect("spilled entries above the fixed stack")
+        } else {
+            // SAFETY: every entry below `top` (and below STACK) was written
+            // before `top` passed it.
+            #[allow(unsafe_code)]
+            unsafe {
+                stack[top].assume_init()
+            }
+        };
         let lanes = lanes & alive;
         if lanes == 0 {
             continue;
@@ -197,22 +142,13 @@ pub fn traverse(
             continue;
         }
         let node = &bvh.nodes[index as usize];
-        // The same conservative margin as single-ray traversal, so that a
-        // packet never culls a box the watertight triangle test would enter.
-        let node_box = node.aabb();
-        let node_mag = node_box.min.abs().max(node_box.max.abs()).max_element();
-        let margin = Vec3A::splat(
-            crate::geometry::mesh::NODE_MARGIN_EPS * f32::EPSILON * (packet.origin_mag + node_mag),
-        );
+        let present = present_children(node);
+        let (hit_lanes, near) = packet.test_node(&DecodedNode::new(node), lanes);
         let mut children: [(u32, LaneMask, f32); 8] = [(0, 0, 0.0); 8];
         let mut count = 0;
         for c in 0..8 {
-            if node.is_child_empty(c) {
-                continue;
-            }
-            let b = node.child_aabb(c);
-            let (hit, dist) = packet.hit_box(b.min - margin, b.max + margin, lanes);
-            if hit == 0 {
+            let hit = hit_lanes[c];
+            if (present >> c) & 1 == 0 || hit == 0 {
                 continue;
             }
             if node.is_leaf(c) {
@@ -224,17 +160,22 @@ pub fn traverse(
                     }
                 }
             } else {
-                children[count] = (node.child_node_index(c), hit, dist);
+                children[count] = (node.child_node_index(c), hit, near[c]);
                 count += 1;
             }
         }
         // Push far to near, so the nearest child is popped first.
         children[..count].sort_unstable_by(|a, b| b.2.total_cmp(&a.2));
         for &child in &children[..count] {
-            // A CWBVH is at most 32 levels deep (obvhs validates it), so at
-            // most 7 * 32 + 1 entries are ever pending.
-            assert!(top < STACK, "CWBVH deeper than 32 levels");
-            stack[top].write(child);
+            // Trees up to 32 levels deep fit the fixed stack (at most
+            // 7 * 32 + 1 entries are pending); deeper ones, which only
+            // degenerate input produces, spill to the heap. obvhs checks
+            // depth in debug builds only.
+            if top < STACK {
+                stack[top].write(child);
+            } else {
+                spill.push(child);
+            }
             top += 1;
         }
     }
@@ -253,24 +194,29 @@ pub fn for_each_lane(mut mask: LaneMask, mut f: impl FnMut(usize)) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use obvhs::aabb::Aabb;
 
     #[test]
-    fn box_test_matches_a_scalar_slab_test() {
+    fn lanes_enter_the_children_their_rays_pass_through() {
+        use crate::accel::build::{BuildQuality, build_bvh};
+        use obvhs::aabb::Aabb;
+        // Two unit boxes on the x axis, at x = 0 and x = 10.
+        let boxes = [
+            Aabb::new(Vec3A::splat(-0.5), Vec3A::splat(0.5)),
+            Aabb::new(Vec3A::new(9.5, -0.5, -0.5), Vec3A::new(10.5, 0.5, 0.5)),
+        ];
+        let bvh = build_bvh(&boxes, BuildQuality::Medium);
         let rays = [
             Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::Z),
             Ray::new(Vec3A::new(3.0, 0.0, -5.0), Vec3A::Z),
-            Ray::new(Vec3A::new(0.5, 0.5, 5.0), -Vec3A::Z),
+            Ray::new(Vec3A::new(10.0, 0.2, 5.0), -Vec3A::Z),
             Ray::new(Vec3A::new(0.0, -0.0, -5.0), Vec3A::new(-0.0, 0.0, 1.0)),
         ];
-        let p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
-        let (mask, near) = p.hit_box(Vec3A::splat(-1.0), Vec3A::splat(1.0), ALL_LANES);
-        assert_eq!(mask, 0b1101);
-        // Entry at 4, widened by a few ulps.
-        assert!(near <= 4.0 && near > 4.0 - 1e-5);
-        // Lanes outside `active` and empty lanes never report a hit.
-        let (mask, _) = p.hit_box(Vec3A::splat(-1.0), Vec3A::splat(1.0), 0b0001);
-        assert_eq!(mask, 0b0001);
-        let _ = Aabb::empty();
+        let mut p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
+        let mut reached = [0 as LaneMask; 2];
+        traverse(&bvh, &mut p, ALL_LANES, |_, lanes, slot| {
+            reached[bvh.primitive_indices[slot] as usize] |= lanes;
+            0
+        });
+        assert_eq!(reached, [0b1001, 0b0100]);
     }
 }

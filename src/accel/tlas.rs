@@ -24,13 +24,13 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::PlocBuilder;
 
-use crate::geometry::mesh::BuildQuality;
-use crate::scene::{Instance, InstanceGeometry};
+use crate::accel::build::{BuildQuality, build_bvh, cwbvh_depth};
 
 const NONE: u32 = u32::MAX;
 
 /// Deepest CwBvh accepted after incremental updates; deeper trees are
-/// rebuilt (packet traversal's stack holds 32 levels).
+/// rebuilt (traversal handles any depth, but a tree this deep has lost
+/// its quality).
 const MAX_CWBVH_DEPTH: usize = 32;
 
 /// How a moved instance's leaf is updated.
@@ -159,46 +159,26 @@ impl std::fmt::Debug for Tlas {
     }
 }
 
-/// Where an instance belongs in the top level.
-enum Placement {
+/// Where an instance belongs in the top level: what the top level needs
+/// to know of it, computed by the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Placement {
+    /// In the BVH, with this world-space box.
     Bounded(Aabb),
+    /// Tested by every ray (infinite planes, huge objects).
     Unbounded,
-    /// A mesh without triangles: never hit.
+    /// Never hit (a mesh without triangles).
     Nowhere,
 }
 
-fn placement(inst: &Instance) -> Placement {
-    match inst.world_bounds() {
-        Some(b) => Placement::Bounded(b),
-        None => {
-            let empty_mesh =
-                matches!(&inst.geometry, InstanceGeometry::Mesh(m) if m.triangle_count() == 0);
-            if empty_mesh {
-                Placement::Nowhere
-            } else {
-                Placement::Unbounded
-            }
-        }
-    }
-}
-
-fn cwbvh_depth(cw: &CwBvh) -> usize {
-    fn depth(cw: &CwBvh, node: usize) -> usize {
-        let n = &cw.nodes[node];
-        let mut d = 0;
-        for c in 0..8 {
-            if !n.is_child_empty(c) && !n.is_leaf(c) {
-                d = d.max(depth(cw, n.child_node_index(c) as usize));
-            }
-        }
-        d + 1
-    }
-    if cw.nodes.is_empty() { 0 } else { depth(cw, 0) }
-}
-
 impl Tlas {
-    /// Builds the top level over `instances`.
-    pub fn build(instances: &[Instance], quality: BuildQuality) -> Self {
+    /// Builds the top level over `count` instances, instance `i` placed
+    /// as `placement(i)`.
+    pub fn build(
+        count: usize,
+        placement: impl Fn(usize) -> Placement,
+        quality: BuildQuality,
+    ) -> Self {
         let mut tlas = Self {
             bvh2: Bvh2::default(),
             cw: CwBvh::default(),
@@ -217,7 +197,7 @@ impl Tlas {
             last_seconds: 0.0,
         };
         let start = Instant::now();
-        tlas.rebuild(instances);
+        tlas.rebuild(count, placement);
         tlas.last_seconds = start.elapsed().as_secs_f64();
         tlas
     }
@@ -232,15 +212,15 @@ impl Tlas {
         self.key_instance.len() - self.free_keys.len()
     }
 
-    fn rebuild(&mut self, instances: &[Instance]) {
-        let mut boxes = Vec::with_capacity(instances.len());
+    fn rebuild(&mut self, count: usize, placement: impl Fn(usize) -> Placement) {
+        let mut boxes = Vec::with_capacity(count);
         self.key_instance.clear();
         self.instance_key.clear();
-        self.instance_key.resize(instances.len(), NONE);
+        self.instance_key.resize(count, NONE);
         self.free_keys.clear();
         self.unbounded.clear();
-        for (i, inst) in instances.iter().enumerate() {
-            match placement(inst) {
+        for i in 0..count {
+            match placement(i) {
                 Placement::Bounded(b) => {
                     self.instance_key[i] = boxes.len() as u32;
                     self.key_instance.push(i as u32);
@@ -269,7 +249,7 @@ impl Tlas {
     fn convert(&mut self) {
         let max_prims = self.quality.params().max_prims_per_leaf.clamp(1, 3);
         self.cw = if self.bvh2.nodes.is_empty() {
-            crate::geometry::mesh::build_bvh(&[], self.quality)
+            build_bvh(&[], self.quality)
         } else {
             bvh2_to_cwbvh(&self.bvh2, max_prims, true, false)
         };
@@ -324,8 +304,8 @@ impl Tlas {
         }
     }
 
-    fn place(&mut self, index: u32, inst: &Instance) {
-        match placement(inst) {
+    fn place(&mut self, index: u32, placement: Placement) {
+        match placement {
             Placement::Bounded(b) => self.insert_key(index, b),
             Placement::Unbounded => self.unbounded.push(index),
             Placement::Nowhere => {}
@@ -340,16 +320,16 @@ impl Tlas {
         }
     }
 
-    /// `instances[index]` was just appended.
-    pub(crate) fn inserted(&mut self, index: u32, inst: &Instance) {
+    /// Instance `index` was just appended, placed as `placement`.
+    pub fn inserted(&mut self, index: u32, placement: Placement) {
         debug_assert_eq!(index as usize, self.instance_key.len());
         self.instance_key.push(NONE);
-        self.place(index, inst);
+        self.place(index, placement);
     }
 
-    /// `instances[index]` is about to be swap-removed (the last instance,
+    /// Instance `index` is about to be swap-removed (the last instance,
     /// at `last`, takes its index).
-    pub(crate) fn removing(&mut self, index: u32, last: u32) {
+    pub fn removing(&mut self, index: u32, last: u32) {
         self.unplace(index);
         if index != last {
             let key = self.instance_key[last as usize];
@@ -369,10 +349,11 @@ impl Tlas {
         self.instance_key.pop();
     }
 
-    /// `instances[index]` moved or changed geometry.
-    pub(crate) fn updated(&mut self, index: u32, inst: &Instance) {
+    /// Instance `index` moved or changed geometry; it is now placed as
+    /// `placement`.
+    pub fn updated(&mut self, index: u32, placement: Placement) {
         let key = self.instance_key[index as usize];
-        match (key != NONE, placement(inst)) {
+        match (key != NONE, placement) {
             (true, Placement::Bounded(b)) => {
                 self.note_change();
                 if !self.rebuild_pending {
@@ -393,7 +374,7 @@ impl Tlas {
             _ => {
                 // Bounded <-> unbounded, or an unbounded shape changed.
                 self.unplace(index);
-                self.place(index, inst);
+                self.place(index, placement);
             }
         }
     }
@@ -401,15 +382,17 @@ impl Tlas {
     /// Applies the changes since the last commit: a rebuild when churn
     /// passed the threshold, otherwise a conversion of the updated
     /// [`Bvh2`]. Does nothing when nothing changed.
-    pub(crate) fn commit(&mut self, instances: &[Instance]) -> TlasUpdate {
+    /// `placement(i)` places each of the `count` instances, as for
+    /// [`Tlas::build`].
+    pub fn commit(&mut self, count: usize, placement: impl Fn(usize) -> Placement) -> TlasUpdate {
         let start = Instant::now();
         let update = if self.rebuild_pending {
-            self.rebuild(instances);
+            self.rebuild(count, placement);
             TlasUpdate::Rebuilt
         } else if self.stale {
             self.convert();
             if cwbvh_depth(&self.cw) > MAX_CWBVH_DEPTH {
-                self.rebuild(instances);
+                self.rebuild(count, placement);
                 TlasUpdate::Rebuilt
             } else {
                 TlasUpdate::Incremental

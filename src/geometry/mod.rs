@@ -6,3 +6,4 @@ pub mod mesh;
 pub mod procedural;
 pub mod shapes;
 pub mod transform;
+pub mod triangle;

@@ -14,10 +14,12 @@ use std::time::Instant;
 use glam::{Vec2, Vec3A};
 use obvhs::aabb::Aabb;
 
+use crate::accel::build::{BuildQuality, MAX_COORDINATE, padded_aabb};
 use crate::accel::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
-use crate::accel::tlas::{Tlas, TlasCounters, TlasPolicy, TlasUpdate};
+use crate::accel::single::traverse_bvh;
+use crate::accel::tlas::{Placement, Tlas, TlasCounters, TlasPolicy, TlasUpdate};
 use crate::core::math::{Color, Ray};
-use crate::geometry::mesh::{BuildQuality, MAX_COORDINATE, Mesh, padded_aabb, traverse_bvh};
+use crate::geometry::mesh::Mesh;
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::{InstanceTransform, Transform};
 use crate::scene::emitters::EmitterTable;
@@ -78,6 +80,17 @@ impl Instance {
             geometry,
             transform: InstanceTransform::new(transform),
             material,
+        }
+    }
+
+    /// Where the top level puts this instance.
+    pub fn placement(&self) -> Placement {
+        match self.world_bounds() {
+            Some(b) => Placement::Bounded(b),
+            None => match &self.geometry {
+                InstanceGeometry::Mesh(m) if m.triangle_count() == 0 => Placement::Nowhere,
+                _ => Placement::Unbounded,
+            },
         }
     }
 
@@ -197,7 +210,7 @@ impl RenderScene {
         quality: BuildQuality,
     ) -> Self {
         let start = Instant::now();
-        let tlas = Tlas::build(&instances, quality);
+        let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
             instances,
@@ -600,7 +613,7 @@ impl RenderScene {
     pub fn push_instance(&mut self, instance: Instance) -> u32 {
         self.emitters_stale = true;
         let index = self.instances.len() as u32;
-        self.tlas.inserted(index, &instance);
+        self.tlas.inserted(index, instance.placement());
         self.instances.push(instance);
         index
     }
@@ -622,7 +635,7 @@ impl RenderScene {
         self.emitters_stale = true;
         let inst = &mut self.instances[index as usize];
         inst.transform = crate::geometry::transform::InstanceTransform::new(transform);
-        self.tlas.updated(index, inst);
+        self.tlas.updated(index, inst.placement());
     }
 
     /// Gives instance `index` another shape or mesh (the mesh's own BVH is
@@ -631,7 +644,7 @@ impl RenderScene {
         self.emitters_stale = true;
         let inst = &mut self.instances[index as usize];
         inst.geometry = geometry;
-        self.tlas.updated(index, inst);
+        self.tlas.updated(index, inst.placement());
     }
 
     /// Points instance `index` at material `material`.
@@ -692,7 +705,10 @@ impl RenderScene {
             self.emitters = EmitterTable::build(&self.instances, &self.materials);
             self.emitters_stale = false;
         }
-        let update = self.tlas.commit(&self.instances);
+        let instances = &self.instances;
+        let update = self
+            .tlas
+            .commit(instances.len(), |i| instances[i].placement());
         if update != TlasUpdate::Unchanged {
             self.tlas_build_seconds = self.tlas.last_seconds;
         }
