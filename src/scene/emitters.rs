@@ -19,8 +19,8 @@ use crate::core::math::{Color, luminance};
 use crate::geometry::mesh::MeshHit;
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::InstanceTransform;
+use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::material::Material;
-use crate::scene::{Instance, InstanceGeometry};
 
 /// A point drawn on an emitter.
 #[derive(Clone, Copy, Debug, PartialEq)]

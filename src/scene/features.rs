@@ -6,9 +6,10 @@
 use serde::Serialize;
 
 use crate::core::settings::Transport;
+use crate::scene::instance::InstanceGeometry;
 use crate::scene::light::WorldLight;
 use crate::scene::material::MaterialClass;
-use crate::scene::{InstanceGeometry, RenderScene};
+use crate::scene::render_scene::RenderScene;
 
 /// A summary of a scene's features.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -35,14 +36,67 @@ pub struct SceneFeatures {
     pub textures: bool,
 }
 
-/// Lower-case name of a material class.
-pub fn class_name(c: MaterialClass) -> &'static str {
-    match c {
-        MaterialClass::Emissive => "emissive",
-        MaterialClass::Diffuse => "diffuse",
-        MaterialClass::Mirror => "mirror",
-        MaterialClass::Glass => "glass",
-        MaterialClass::General => "general",
+/// What a material class does: the one table that stage gating, the
+/// shading kernels and the scene summary read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClassTraits {
+    /// Lower-case name (stage names are `shade_<name>`).
+    pub name: &'static str,
+    /// Evaluates lights: a diffuse or glossy lobe, so shadow rays (and,
+    /// under path transport, next-event estimation and diffuse bounces).
+    pub lit: bool,
+    /// Spawns specular reflection or refraction rays.
+    pub scatters: bool,
+}
+
+/// [`ClassTraits`] of every class, indexed by `MaterialClass as usize`.
+pub const CLASS_TRAITS: [ClassTraits; 5] = [
+    ClassTraits {
+        name: "emissive",
+        lit: false,
+        scatters: false,
+    },
+    ClassTraits {
+        name: "diffuse",
+        lit: true,
+        scatters: false,
+    },
+    ClassTraits {
+        name: "mirror",
+        lit: false,
+        scatters: true,
+    },
+    ClassTraits {
+        name: "glass",
+        lit: false,
+        scatters: true,
+    },
+    ClassTraits {
+        name: "general",
+        lit: true,
+        scatters: true,
+    },
+];
+
+impl MaterialClass {
+    /// This class's row of [`CLASS_TRAITS`].
+    pub fn traits(self) -> ClassTraits {
+        CLASS_TRAITS[self as usize]
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        self.traits().name
+    }
+
+    /// Does this class evaluate the lights (shadow rays)?
+    pub fn is_lit(self) -> bool {
+        self.traits().lit
+    }
+
+    /// Can this class spawn reflection or refraction rays?
+    pub fn scatters(self) -> bool {
+        self.traits().scatters
     }
 }
 
@@ -71,7 +125,7 @@ impl SceneFeatures {
         f.material_classes = MaterialClass::ALL
             .into_iter()
             .filter(|c| f.classes[*c as usize])
-            .map(class_name)
+            .map(MaterialClass::name)
             .collect();
         for l in &scene.lights {
             match l {
@@ -94,9 +148,24 @@ impl SceneFeatures {
     /// material evaluates lights and some light exists (area lights count
     /// only for path transport).
     pub fn needs_shadow_rays(&self, transport: Transport) -> bool {
-        let lit = self.has(MaterialClass::Diffuse) || self.has(MaterialClass::General);
+        let lit = MaterialClass::ALL
+            .into_iter()
+            .any(|c| c.is_lit() && self.has(c));
         let punctual = self.point_lights + self.spot_lights + self.directional_lights > 0;
         let area = transport == Transport::Path && self.area_light_primitives > 0;
         lit && (punctual || area)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_class_table_is_in_class_order() {
+        let names: Vec<_> = MaterialClass::ALL.iter().map(|c| c.name()).collect();
+        assert_eq!(names, ["emissive", "diffuse", "mirror", "glass", "general"]);
+        assert!(MaterialClass::General.is_lit() && MaterialClass::General.scatters());
+        assert!(!MaterialClass::Emissive.is_lit() && !MaterialClass::Emissive.scatters());
     }
 }

@@ -195,7 +195,8 @@ impl Default for Material {
 
 /// Which shading kernel a material needs: the wavefront integrator sorts
 /// hits into one queue per class so that each kernel handles one kind of
-/// surface without branching on it.
+/// surface without branching on it. What each class does (is it lit, does
+/// it scatter) is the one table in [`crate::scene::features`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum MaterialClass {
     /// Only emission (or nothing): no lights, no secondary rays.
@@ -219,19 +220,6 @@ impl MaterialClass {
         MaterialClass::Glass,
         MaterialClass::General,
     ];
-
-    /// Does this class evaluate the lights (shadow rays)?
-    pub fn is_lit(self) -> bool {
-        matches!(self, MaterialClass::Diffuse | MaterialClass::General)
-    }
-
-    /// Can this class spawn reflection or refraction rays?
-    pub fn scatters(self) -> bool {
-        matches!(
-            self,
-            MaterialClass::Mirror | MaterialClass::Glass | MaterialClass::General
-        )
-    }
 }
 
 /// A material evaluated at one surface point: what the shading kernels read.

@@ -1,0 +1,401 @@
+//! Intersection queries of a [`RenderScene`]: closest hit and occlusion
+//! for single rays, packets of eight and streams, and the brute-force
+//! reference.
+
+use crate::accel::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
+use crate::accel::single::traverse_bvh;
+use crate::core::math::Ray;
+use crate::geometry::mesh::Mesh;
+use crate::scene::instance::{Hit, Instance, InstanceGeometry, LocalHit, to_object};
+use crate::scene::render_scene::RenderScene;
+
+/// Bits of a deferred stream key that hold the ray's index.
+const RAY_BITS: u64 = 0xffff_ffff;
+
+/// Buffers of [`RenderScene::intersect_stream`], kept between calls so
+/// that tracing allocates nothing once they have grown.
+#[derive(Debug, Default)]
+pub struct StreamScratch {
+    best: Vec<Option<(f32, u32, LocalHit)>>,
+    /// (instance << 35 | octant << 32 | ray) of rays reaching a mesh.
+    deferred: Vec<u64>,
+    stream: crate::accel::stream::Stream,
+    wt: Vec<crate::geometry::mesh::WatertightRay>,
+    mesh_hits: Vec<Option<crate::geometry::mesh::MeshHit>>,
+}
+
+impl StreamScratch {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.best.capacity() * size_of::<Option<(f32, u32, LocalHit)>>()
+            + self.deferred.capacity() * size_of::<u64>()
+            + self.stream.bytes()
+            + self.wt.capacity() * size_of::<crate::geometry::mesh::WatertightRay>()
+            + self.mesh_hits.capacity() * size_of::<Option<crate::geometry::mesh::MeshHit>>()
+    }
+}
+
+impl RenderScene {
+    #[inline]
+    fn intersect_instance(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, LocalHit)> {
+        self.intersect_instance_with(index, ray, t_min, t_max, false)
+    }
+
+    /// Closest hit on one instance; meshes by their BVH, or by testing
+    /// every triangle when `brute_force` is set.
+    #[inline]
+    fn intersect_instance_with(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        brute_force: bool,
+    ) -> Option<(f32, LocalHit)> {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) => s
+                .intersect(&local, t_min, t_max)
+                .map(|h| (h.t, LocalHit::shape(&h))),
+            InstanceGeometry::Mesh(m) => if brute_force {
+                m.intersect_brute_force(&local, t_min, t_max)
+            } else {
+                m.intersect(&local, t_min, t_max)
+            }
+            .map(|h| (h.t, LocalHit::Mesh(h))),
+        }
+    }
+
+    #[inline]
+    fn occludes_instance(&self, index: u32, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).is_some(),
+            InstanceGeometry::Mesh(m) => m.occluded(&local, t_min, t_max),
+        }
+    }
+
+    /// The closest hit with `t` in `(t_min, t_max)`.
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut best: Option<(f32, u32, LocalHit)> = None;
+        let mut t_max = t_max;
+        for &i in &self.tlas.unbounded {
+            if let Some((t, h)) = self.intersect_instance(i, ray, t_min, t_max) {
+                t_max = t;
+                best = Some((t, i, h));
+            }
+        }
+        if !self.tlas.leaf_instances.is_empty() {
+            traverse_bvh(&self.tlas.cw, ray, t_min, t_max, false, |slot, t_max| {
+                let inst = self.tlas.leaf_instances[slot];
+                let (t, h) = self.intersect_instance(inst, ray, t_min, t_max)?;
+                best = Some((t, inst, h));
+                Some(t)
+            });
+        }
+        let (t, index, local) = best?;
+        Some(self.finish_hit(t, index, local))
+    }
+
+    /// True when anything blocks the ray between `t_min` and `t_max`; stops
+    /// at the first blocker found.
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        if self
+            .tlas
+            .unbounded
+            .iter()
+            .any(|&i| self.occludes_instance(i, ray, t_min, t_max))
+        {
+            return true;
+        }
+        if self.tlas.leaf_instances.is_empty() {
+            return false;
+        }
+        traverse_bvh(&self.tlas.cw, ray, t_min, t_max, true, |slot, t_max| {
+            self.occludes_instance(self.tlas.leaf_instances[slot], ray, t_min, t_max)
+                .then_some(t_min)
+        })
+    }
+
+    /// Closest hits of up to [`LANES`] rays at once (each searched in
+    /// `(0, inf)`), by packet traversal of the top-level BVH and of mesh
+    /// BVHs: the same hits as [`RenderScene::intersect`] on each ray.
+    pub fn intersect_packet(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        self.intersect_packet_with(rays, out, true)
+    }
+
+    /// Closest hits of up to [`LANES`] rays (each searched in `(0, inf)`)
+    /// on the unbounded instances and, by packet traversal of the top
+    /// level, on the shapes, into `best`. The lanes of `p` that reach mesh
+    /// instance `index` go to `mesh(p, lanes, index, instance, mesh, best)`,
+    /// which may record hits in `best` and shrink `p.t_max`.
+    fn top_level_packet(
+        &self,
+        rays: &[Ray],
+        best: &mut [Option<(f32, u32, LocalHit)>],
+        mut mesh: impl FnMut(
+            &mut Packet,
+            LaneMask,
+            u32,
+            &Instance,
+            &Mesh,
+            &mut [Option<(f32, u32, LocalHit)>],
+        ),
+    ) {
+        let n = rays.len().min(LANES);
+        let mut t_max = [f32::INFINITY; LANES];
+        for (l, ray) in rays[..n].iter().enumerate() {
+            for &i in &self.tlas.unbounded {
+                if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
+                    t_max[l] = t;
+                    best[l] = Some((t, i, h));
+                }
+            }
+        }
+        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
+        packet::traverse(&self.tlas.cw, &mut packet, ALL_LANES, |p, lanes, slot| {
+            let index = self.tlas.leaf_instances[slot];
+            let inst = &self.instances[index as usize];
+            match &inst.geometry {
+                InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
+                    let local = to_object(inst, &p.rays[l]);
+                    if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
+                        p.t_max[l] = h.t;
+                        best[l] = Some((h.t, index, LocalHit::shape(&h)));
+                    }
+                }),
+                InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
+            }
+            0
+        });
+    }
+
+    /// [`RenderScene::intersect_packet`], with the top level traversed as a
+    /// packet and each mesh either as a packet (`mesh_packets`) or one lane
+    /// at a time, for rays too incoherent to share a mesh's nodes.
+    pub fn intersect_packet_with(&self, rays: &[Ray], out: &mut [Option<Hit>], mesh_packets: bool) {
+        let n = rays.len().min(LANES);
+        let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
+        self.top_level_packet(rays, &mut best, |p, lanes, index, inst, m, best| {
+            let mut hits = [None; LANES];
+            if mesh_packets {
+                let mut local = Packet::new(&[], &[], &[]);
+                for_each_lane(lanes, |l| {
+                    local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                });
+                m.intersect_packet(&mut local, lanes, &mut hits);
+            } else {
+                for_each_lane(lanes, |l| {
+                    hits[l] = m.intersect(&to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]);
+                });
+            }
+            for_each_lane(lanes, |l| {
+                if let Some(h) = hits[l] {
+                    p.t_max[l] = h.t;
+                    best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                }
+            });
+        });
+        for (l, o) in out[..n].iter_mut().enumerate() {
+            *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
+        }
+    }
+
+    /// Closest hits of all `rays` (each searched in `(0, inf)`), by
+    /// streams: the top level is traversed in packets of eight
+    /// consecutive rays, shapes are intersected there, and every ray that
+    /// reaches a mesh instance joins that instance's stream for its
+    /// direction octant; each stream then traverses the mesh's BVH at once
+    /// ([`crate::accel::stream`]). The same hits as [`RenderScene::intersect`] on
+    /// each ray. `scratch` keeps the buffers between calls.
+    pub fn intersect_stream(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+        scratch: &mut StreamScratch,
+    ) {
+        let n = rays.len();
+        debug_assert!(
+            n <= RAY_BITS as usize,
+            "ray indices are 32-bit in stream keys"
+        );
+        let StreamScratch {
+            best,
+            deferred,
+            stream,
+            wt,
+            mesh_hits,
+        } = scratch;
+        best.clear();
+        best.resize(n, None);
+        deferred.clear();
+        for (p, packet_rays) in rays.chunks(LANES).enumerate() {
+            let first = p * LANES;
+            let best = &mut best[first..first + packet_rays.len()];
+            self.top_level_packet(packet_rays, best, |p, lanes, index, inst, _, _| {
+                for_each_lane(lanes, |l| {
+                    let d = inst
+                        .transform
+                        .to_object
+                        .transform_vector3a(p.rays[l].direction);
+                    let octant =
+                        (d.x < 0.0) as u64 | ((d.y < 0.0) as u64) << 1 | ((d.z < 0.0) as u64) << 2;
+                    deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
+                })
+            });
+        }
+        // One stream per (instance, octant), in a fixed order.
+        deferred.sort_unstable();
+        let mut rest = &deferred[..];
+        while let Some(&key) = rest.first() {
+            let group = rest.partition_point(|&k| k >> 32 == key >> 32);
+            let index = (key >> 35) as u32;
+            let inst = &self.instances[index as usize];
+            let InstanceGeometry::Mesh(mesh) = &inst.geometry else {
+                unreachable!("only meshes are deferred")
+            };
+            stream.clear();
+            for &k in &rest[..group] {
+                let i = (k & RAY_BITS) as usize;
+                let t_max = best[i].as_ref().map_or(f32::INFINITY, |b| b.0);
+                stream.push(to_object(inst, &rays[i]), 0.0, t_max);
+            }
+            mesh.intersect_stream(stream, wt, mesh_hits);
+            for (&k, h) in rest[..group].iter().zip(mesh_hits.iter()) {
+                if let Some(h) = h {
+                    best[(k & RAY_BITS) as usize] = Some((h.t, index, LocalHit::Mesh(*h)));
+                }
+            }
+            rest = &rest[group..];
+        }
+        for (o, b) in out[..n].iter_mut().zip(best.iter()) {
+            *o = b.map(|(t, i, h)| self.finish_hit(t, i, h));
+        }
+    }
+
+    /// For up to [`LANES`] segments `(0, t_max[l])` along `rays`, the mask
+    /// of those blocked by anything: the same answers as
+    /// [`RenderScene::occluded`] on each.
+    pub fn occluded_packet(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+        self.occluded_packet_with(rays, t_max, true)
+    }
+
+    /// [`RenderScene::occluded_packet`], with meshes traversed as a packet
+    /// (`mesh_packets`) or one lane at a time.
+    pub fn occluded_packet_with(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+        mesh_packets: bool,
+    ) -> LaneMask {
+        let n = rays.len().min(LANES);
+        let mut blocked: LaneMask = 0;
+        for (l, ray) in rays[..n].iter().enumerate() {
+            if self
+                .tlas
+                .unbounded
+                .iter()
+                .any(|&i| self.occludes_instance(i, ray, 0.0, t_max[l]))
+            {
+                blocked |= 1 << l;
+            }
+        }
+        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
+        let todo = ALL_LANES & !blocked;
+        packet::traverse(&self.tlas.cw, &mut packet, todo, |p, lanes, slot| {
+            let inst = &self.instances[self.tlas.leaf_instances[slot] as usize];
+            let now = match &inst.geometry {
+                InstanceGeometry::Shape(s) => {
+                    let mut now = 0;
+                    for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                            now |= 1 << l;
+                        }
+                    });
+                    now
+                }
+                InstanceGeometry::Mesh(m) if !mesh_packets => {
+                    let mut now = 0;
+                    for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if m.occluded(&local, p.t_min[l], p.t_max[l]) {
+                            now |= 1 << l;
+                        }
+                    });
+                    now
+                }
+                InstanceGeometry::Mesh(m) => {
+                    let mut local = Packet::new(&[], &[], &[]);
+                    for_each_lane(lanes, |l| {
+                        local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                    });
+                    m.occluded_packet(&mut local, lanes)
+                }
+            };
+            blocked |= now;
+            now
+        });
+        blocked & packet.valid
+    }
+
+    /// The closest hit found by testing every instance, and every triangle
+    /// of every mesh, without any BVH: the reference that BVH traversal is
+    /// tested against.
+    pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut best: Option<(f32, u32, LocalHit)> = None;
+        let mut t_max = t_max;
+        for i in 0..self.instances.len() as u32 {
+            if let Some((t, h)) = self.intersect_instance_with(i, ray, t_min, t_max, true) {
+                t_max = t;
+                best = Some((t, i, h));
+            }
+        }
+        let (t, index, local) = best?;
+        Some(self.finish_hit(t, index, local))
+    }
+
+    fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
+        let inst = &self.instances[index as usize];
+        let xf = &inst.transform;
+        // The point comes from the object-space surface point, correct to a
+        // few ulps of its own coordinates; `ray.at(t)` would carry the
+        // rounding of a possibly distant ray origin.
+        let (point, gn, sn, uv) = match (local, &inst.geometry) {
+            (LocalHit::Shape { point, normal, uv }, _) => {
+                let n = xf.normal(normal);
+                (xf.to_world.transform_point3a(point), n, n, uv)
+            }
+            (LocalHit::Mesh(h), InstanceGeometry::Mesh(m)) => {
+                let s = m.surface(&h);
+                let gn = xf.normal(s.geometric_normal);
+                let mut sn = xf.normal(s.shading_normal);
+                if sn.dot(gn) < 0.0 {
+                    sn = -sn;
+                }
+                (xf.to_world.transform_point3a(s.point), gn, sn, s.uv)
+            }
+            (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => {
+                unreachable!("hit kind matches geometry")
+            }
+        };
+        Hit {
+            t,
+            point,
+            geometric_normal: gn,
+            shading_normal: sn,
+            uv,
+            instance: index,
+            material: inst.material,
+        }
+    }
+}

@@ -1,0 +1,75 @@
+//! [`RenderScene`]: instances, the top level over them, materials, lights
+//! and area lights, ready for rendering.
+
+use std::time::Instant;
+
+use crate::accel::build::BuildQuality;
+use crate::accel::tlas::Tlas;
+use crate::core::math::Color;
+use crate::scene::emitters::EmitterTable;
+use crate::scene::instance::{Instance, InstanceGeometry};
+use crate::scene::light::WorldLight;
+use crate::scene::material::Material;
+
+/// A scene ready for rendering: instances, top-level BVH, materials, lights.
+#[derive(Debug)]
+pub struct RenderScene {
+    /// All instances; the top-level BVH indexes this array.
+    pub instances: Vec<Instance>,
+    /// Materials referenced by instances.
+    pub materials: Vec<Material>,
+    /// Lights in world space.
+    pub lights: Vec<WorldLight>,
+    /// Radiance of escaped rays.
+    pub background: Color,
+    /// Emissive surfaces as area lights, for path tracing (rebuilt by
+    /// [`RenderScene::commit`] when instances or materials change).
+    pub emitters: EmitterTable,
+    /// Set by changes to instances or materials: the emitter table is
+    /// rebuilt at the next commit.
+    pub(super) emitters_stale: bool,
+    /// Top-level BVH over bounded instances, the instance of each of its
+    /// leaf slots, and the unbounded instances (infinite planes) tested one
+    /// by one.
+    pub(super) tlas: Tlas,
+    /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
+    /// or by the last [`RenderScene::commit`] that changed it).
+    pub tlas_build_seconds: f64,
+}
+
+impl RenderScene {
+    /// Builds the top-level BVH over `instances`.
+    pub fn new(
+        instances: Vec<Instance>,
+        materials: Vec<Material>,
+        lights: Vec<WorldLight>,
+        background: Color,
+        quality: BuildQuality,
+    ) -> Self {
+        let start = Instant::now();
+        let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
+        let emitters = EmitterTable::build(&instances, &materials);
+        Self {
+            instances,
+            materials,
+            lights,
+            background,
+            emitters,
+            emitters_stale: false,
+            tlas,
+            tlas_build_seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// Total triangles over all instances (instanced meshes count once per
+    /// instance).
+    pub fn triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| match &i.geometry {
+                InstanceGeometry::Mesh(m) => m.triangle_count(),
+                InstanceGeometry::Shape(_) => 0,
+            })
+            .sum()
+    }
+}

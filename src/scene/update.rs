@@ -1,0 +1,181 @@
+//! The incremental-update API of a [`RenderScene`].
+
+use crate::accel::tlas::{TlasCounters, TlasPolicy, TlasUpdate};
+use crate::core::math::Color;
+use crate::geometry::transform::Transform;
+use crate::scene::emitters::EmitterTable;
+use crate::scene::instance::{Instance, InstanceGeometry};
+use crate::scene::light::WorldLight;
+use crate::scene::material::Material;
+use crate::scene::render_scene::RenderScene;
+
+/// Incremental updates, for scenes that change from frame to frame.
+///
+/// Every change goes through these methods and becomes visible to
+/// traversal at the next [`RenderScene::commit`], which is also the one
+/// place where anything derived from instances and materials is brought up
+/// to date. Between a change and the commit, intersection queries must not
+/// be made. Mesh BVHs are never rebuilt: they live in the shared
+/// [`Mesh`]es; only the top level over instances changes.
+impl RenderScene {
+    /// Appends an instance; returns its index. Its material index must be
+    /// valid once the scene is committed.
+    pub fn push_instance(&mut self, instance: Instance) -> u32 {
+        self.emitters_stale = true;
+        let index = self.instances.len() as u32;
+        self.tlas.inserted(index, instance.placement());
+        self.instances.push(instance);
+        index
+    }
+
+    /// Removes instance `index` by moving the last instance into its place
+    /// (so the last instance's index becomes `index`); returns the removed
+    /// instance. Panics if `index` is out of range.
+    pub fn swap_remove_instance(&mut self, index: u32) -> Instance {
+        assert!(
+            (index as usize) < self.instances.len(),
+            "instance {index} out of range ({} instances)",
+            self.instances.len()
+        );
+        self.emitters_stale = true;
+        let last = self.instances.len() as u32 - 1;
+        self.tlas.removing(index, last);
+        self.instances.swap_remove(index as usize)
+    }
+
+    /// Moves instance `index`; `transform` must be valid
+    /// ([`Transform::is_valid`]).
+    pub fn set_instance_transform(&mut self, index: u32, transform: &Transform) {
+        self.emitters_stale = true;
+        let inst = &mut self.instances[index as usize];
+        inst.transform = crate::geometry::transform::InstanceTransform::new(transform);
+        self.tlas.updated(index, inst.placement());
+    }
+
+    /// Gives instance `index` another shape or mesh (the mesh's own BVH is
+    /// reused as it is).
+    pub fn set_instance_geometry(&mut self, index: u32, geometry: InstanceGeometry) {
+        self.emitters_stale = true;
+        let inst = &mut self.instances[index as usize];
+        inst.geometry = geometry;
+        self.tlas.updated(index, inst.placement());
+    }
+
+    /// Points instance `index` at material `material`.
+    pub fn set_instance_material(&mut self, index: u32, material: u32) {
+        self.emitters_stale = true;
+        self.instances[index as usize].material = material;
+    }
+
+    /// Appends a material; returns its index.
+    pub fn push_material(&mut self, material: Material) -> u32 {
+        self.emitters_stale = true;
+        self.materials.push(material);
+        self.materials.len() as u32 - 1
+    }
+
+    /// Replaces material `index`. Touches no BVH.
+    pub fn set_material(&mut self, index: u32, material: Material) {
+        self.emitters_stale = true;
+        self.materials[index as usize] = material;
+    }
+
+    /// Removes material `index` by moving the last material into its
+    /// place; instances that used the last material are pointed at
+    /// `index`. No instance may still use the removed material.
+    pub fn swap_remove_material(&mut self, index: u32) -> Material {
+        assert!(
+            (index as usize) < self.materials.len(),
+            "material {index} out of range ({} materials)",
+            self.materials.len()
+        );
+        self.emitters_stale = true;
+        let last = self.materials.len() as u32 - 1;
+        if index != last {
+            for inst in &mut self.instances {
+                if inst.material == last {
+                    inst.material = index;
+                }
+            }
+        }
+        self.materials.swap_remove(index as usize)
+    }
+
+    /// Replaces the lights.
+    pub fn set_lights(&mut self, lights: Vec<WorldLight>) {
+        self.lights = lights;
+    }
+
+    /// Sets the radiance of escaped rays.
+    pub fn set_background(&mut self, background: Color) {
+        self.background = background;
+    }
+
+    /// Makes the changes since the last commit visible: rebuilds the
+    /// emitter table if instances or materials changed, updates the top
+    /// level (leaf updates then a conversion, or a full rebuild above the
+    /// churn threshold of [`TlasPolicy`]), and returns what was done to
+    /// the top level.
+    pub fn commit(&mut self) -> TlasUpdate {
+        if self.emitters_stale {
+            // Area lights follow moved, added, removed and re-materialed
+            // instances; this is a table, not a BVH.
+            self.emitters = EmitterTable::build(&self.instances, &self.materials);
+            self.emitters_stale = false;
+        }
+        let instances = &self.instances;
+        let update = self
+            .tlas
+            .commit(instances.len(), |i| instances[i].placement());
+        if update != TlasUpdate::Unchanged {
+            self.tlas_build_seconds = self.tlas.last_seconds;
+        }
+        update
+    }
+
+    /// Cumulative work done on the top level.
+    pub fn tlas_counters(&self) -> TlasCounters {
+        self.tlas.counters()
+    }
+
+    /// The policy deciding between leaf updates and rebuilds.
+    pub fn tlas_policy(&self) -> TlasPolicy {
+        self.tlas.policy
+    }
+
+    /// Changes the policy deciding between leaf updates and rebuilds.
+    pub fn set_tlas_policy(&mut self, policy: TlasPolicy) {
+        self.tlas.policy = policy;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::build::BuildQuality;
+
+    fn empty() -> RenderScene {
+        RenderScene::new(
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Color::ZERO,
+            BuildQuality::Medium,
+        )
+    }
+
+    // On an empty scene `len - 1` used to underflow (a debug-build
+    // overflow panic, a wrap to u32::MAX in release) before the range
+    // check could report the bad index.
+    #[test]
+    #[should_panic(expected = "instance 0 out of range (0 instances)")]
+    fn removing_an_instance_from_an_empty_scene_names_the_index() {
+        empty().swap_remove_instance(0);
+    }
+
+    #[test]
+    #[should_panic(expected = "material 0 out of range (0 materials)")]
+    fn removing_a_material_from_an_empty_scene_names_the_index() {
+        empty().swap_remove_material(0);
+    }
+}
