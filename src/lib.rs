@@ -18,6 +18,9 @@
 //! command-line program.
 
 #![warn(missing_docs)]
+// Unsafe code only where a measurement justifies it, each with a local
+// `#[allow(unsafe_code)]` and a SAFETY comment.
+#![deny(unsafe_code)]
 // Checks such as `!(x > 0.0)` are written that way on purpose: they also
 // reject NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -138,7 +138,7 @@ pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
                         [c.x, c.y, c.z]
                     })
                     .collect();
-                let bytes: &[u8] = bytemuck_f32(&floats);
+                let bytes: &[u8] = bytemuck::cast_slice::<f32, u8>(&floats);
                 image::codecs::openexr::OpenExrEncoder::new(&mut w)
                     .write_image(bytes, film.width, film.height, ExtendedColorType::Rgb32F)
                     .map_err(|e| err(e.to_string()))?;
@@ -164,13 +164,6 @@ pub fn persist_readable(tmp: tempfile::NamedTempFile, path: &Path) -> Result<(),
     tmp.persist(path)
         .map(|_| ())
         .map_err(|e| e.error.to_string())
-}
-
-/// Views f32s as native-endian bytes (what the image encoders expect).
-fn bytemuck_f32(v: &[f32]) -> &[u8] {
-    // SAFETY: f32 has no padding or invalid bit patterns, u8 has alignment 1,
-    // and the length covers exactly the same memory.
-    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(v)) }
 }
 
 /// Reads an EXR or PNG back as linear radiance (PNG is decoded from sRGB).
