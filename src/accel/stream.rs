@@ -12,13 +12,12 @@
 //! visited in one order for the whole stream, nearest first along the
 //! rays' summed direction; [`crate::scene::RenderScene::intersect_stream`]
 //! groups rays by direction octant so that this order is near to far for
-//! each ray too (on `glass_mirror` the grouping measured within noise of
-//! one stream per mesh).
+//! each ray too (measured: see the README's measurement notes).
 //!
 //! Against one-ray traversal, which tests each node's eight children in
 //! SIMD registers as well, a stream saves the per-ray traversal bookkeeping
-//! and visits fewer nodes per ray (11.4 against 12.4 for the deepest rays
-//! of `glass_mirror`, leaves first); it gains most on coherent rays.
+//! and visits fewer nodes per ray (leaves first); it gains most on
+//! coherent rays.
 //!
 //! This module knows nothing of ECS scheduling; it is a kernel like
 //! [`crate::accel::packet`].
