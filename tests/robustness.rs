@@ -12,7 +12,8 @@ use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::scene::material::SurfaceSample;
 use prism::systems::{self, Frame, RenderConfig};
-use prism::transport::interaction::{Interaction, RayKind, scatter};
+use prism::transport::interaction::{Interaction, RayKind};
+use prism::transport::whitted::scatter;
 
 /// Every integrator the tests run; adding one is one line.
 const KINDS: &[IntegratorKind] = &[IntegratorKind::Recursive, IntegratorKind::Wavefront];

@@ -12,8 +12,9 @@ use crate::image::film::Film;
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
-use crate::transport::interaction::{Interaction, RayKind, direct_light, scatter};
+use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::path::{self, LobeChoice};
+use crate::transport::whitted::{direct_light, scatter};
 
 /// Radiance arriving along `ray`; `depth` is the number of bounces so far
 /// and `throughput` the weight this radiance will be multiplied by on its

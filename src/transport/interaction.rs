@@ -1,5 +1,6 @@
-//! Shading kernels shared by every integrator: the local lighting model,
-//! shadow-ray setup and the specular scattering of the Whitted model.
+//! What both transports need at a hit: the surface interaction oriented
+//! towards the viewer, the local lighting model's BRDF, and the shadow and
+//! secondary rays that shading hands to an integrator.
 //!
 //! They take plain values and return plain values, so the recursive and
 //! the wavefront tracers share the math while keeping their own control
@@ -10,8 +11,6 @@ use std::f32::consts::PI;
 use glam::Vec3A;
 
 use crate::core::math::{Color, Ray};
-use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
-use crate::scene::light::{LightSample, WorldLight};
 use crate::scene::material::SurfaceSample;
 use crate::scene::{Hit, RenderScene};
 
@@ -93,37 +92,6 @@ pub struct ShadowQuery {
     pub radiance: Color,
 }
 
-/// Sets up the shadow ray for one light, or `None` when the light cannot
-/// contribute (below the horizon, outside a spot cone, zero BRDF).
-#[inline]
-pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery> {
-    let LightSample {
-        wi,
-        distance,
-        irradiance,
-    } = light.illuminate(it.point)?;
-    if it.ng.dot(wi) <= 0.0 {
-        return None;
-    }
-    let radiance = brdf_cos(&it.surface, it.ns, it.wo, wi) * irradiance;
-    if !(radiance.max_element() > 0.0) {
-        return None;
-    }
-    let origin = offset_origin_relative(it.point, it.ng);
-    let t_max = if distance.is_finite() {
-        // Distance from the offset origin, shortened by a relative margin
-        // so the light's own position is never counted as a blocker.
-        (it.point + wi * distance - origin).length() * (1.0 - 1e-5)
-    } else {
-        f32::INFINITY
-    };
-    Some(ShadowQuery {
-        ray: Ray::new(origin, wi),
-        t_max,
-        radiance,
-    })
-}
-
 /// Kind of a secondary ray.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RayKind {
@@ -144,48 +112,4 @@ pub struct Secondary {
     pub weight: Color,
     /// Reflection or refraction.
     pub kind: RayKind,
-}
-
-/// The perfectly specular rays leaving a hit: at most one reflection
-/// (mirror plus the dielectric's Fresnel part, which share a direction)
-/// and one refraction.
-#[inline]
-pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
-    let s = &it.surface;
-    let d = -it.wo;
-    let mut reflect_w = s.mirror;
-    let mut refraction = None;
-    if s.transmission > 0.0 {
-        // Relative index: outside -> inside when entering the front face.
-        let eta = if it.front_face { 1.0 / s.ior } else { s.ior };
-        let cos_i = it.ns.dot(it.wo).max(0.0);
-        let f = fresnel_dielectric(cos_i, eta);
-        reflect_w += Color::splat(s.transmission * f);
-        if f < 1.0
-            && let Some(t) = refract(d, it.ns, eta)
-        {
-            // The refracted ray must leave on the far side of the true surface.
-            if t.dot(it.ng) < 0.0 {
-                refraction = Some(Secondary {
-                    ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
-                    weight: s.transmission_tint * (s.transmission * (1.0 - f)),
-                    kind: RayKind::Refraction,
-                });
-            }
-        }
-    }
-    let reflection = (reflect_w.max_element() > 0.0).then(|| {
-        let mut r = reflect(d, it.ns);
-        if r.dot(it.ng) <= 0.0 {
-            // A shading normal can reflect below the surface; fall back to
-            // the geometric normal.
-            r = reflect(d, it.ng);
-        }
-        Secondary {
-            ray: Ray::new(offset_origin_relative(it.point, it.ng), r),
-            weight: reflect_w,
-            kind: RayKind::Reflection,
-        }
-    });
-    [reflection, refraction]
 }

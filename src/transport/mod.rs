@@ -5,3 +5,4 @@
 
 pub mod interaction;
 pub mod path;
+pub mod whitted;

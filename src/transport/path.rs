@@ -26,7 +26,8 @@ use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::RenderSettings;
 use crate::scene::RenderScene;
-use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos, direct_light};
+use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
+use crate::transport::whitted::direct_light;
 
 /// Probabilities of choosing each lobe of a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -13,8 +13,8 @@
 //!
 //! [`scene::RenderScene::intersect`]: crate::scene::RenderScene::intersect
 //! [`shading::Interaction`]: crate::transport::interaction::Interaction
-//! [`shading::direct_light`]: crate::transport::interaction::direct_light
-//! [`shading::scatter`]: crate::transport::interaction::scatter
+//! [`shading::direct_light`]: crate::transport::whitted::direct_light
+//! [`shading::scatter`]: crate::transport::whitted::scatter
 
 pub mod queues;
 
@@ -40,7 +40,8 @@ use crate::transport::path::{self, LobeChoice};
 pub type RoutingScratch = Vec<(EscapedQueue, ClassQueues, StreamBuffers)>;
 
 use crate::integrators::counters::{RayCounts, RenderCounters};
-use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, direct_light, scatter};
+use crate::transport::interaction::{Interaction, RayKind, ShadowQuery};
+use crate::transport::whitted::{direct_light, scatter};
 
 /// One chunk's buffers for tracing its rays as streams.
 #[derive(Debug, Default)]
