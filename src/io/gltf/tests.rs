@@ -1,6 +1,7 @@
 //! Tests of the glTF loader, mostly end to end through [`load_gltf`] on
 //! small documents written by the tests.
 
+use super::container::{base64_decode, has_scheme, percent_decode_str};
 use super::*;
 use crate::scene::light::WorldLight;
 use serde_json::{Value, json};
