@@ -3,7 +3,10 @@
 
 use super::container::{base64_decode, has_scheme, percent_decode_str};
 use super::*;
+use crate::image::output::srgb_to_linear;
 use crate::scene::light::WorldLight;
+use crate::scene::material::Texture;
+use glam::Vec2;
 use serde_json::{Value, json};
 
 fn b64(bytes: &[u8]) -> String {
