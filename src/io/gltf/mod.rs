@@ -78,6 +78,11 @@
 //! The loader never panics on malformed input: it does its own buffer,
 //! image and accessor decoding with bounds checks instead of relying on
 //! the `gltf` crate's importer.
+//!
+//! [`Camera`]: crate::scene::camera::Camera
+//! [`Light::Point`]: crate::scene::light::Light::Point
+//! [`Light::Spot`]: crate::scene::light::Light::Spot
+//! [`Light::Directional`]: crate::scene::light::Light::Directional
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -88,13 +93,12 @@ use glam::{Affine3A, Mat4, Quat, Vec3, Vec3A};
 use crate::core::error::Error;
 use crate::geometry::mesh::{BuildQuality, MAX_COORDINATE, Mesh};
 use crate::geometry::transform::Transform;
-use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc};
-use crate::scene::camera::Camera;
-use crate::scene::light::Light;
+use crate::io::desc::{Geometry, ObjectDesc, SceneDesc};
 use crate::scene::material::{ImageTexture, Material};
 
 mod accessors;
 mod container;
+mod lights_cameras;
 mod materials;
 mod meshes;
 #[cfg(test)]
@@ -102,7 +106,8 @@ mod tests;
 mod textures;
 
 use container::open;
-use materials::{check_color, check_factor, material};
+use lights_cameras::{convert_camera, convert_light};
+use materials::material;
 use meshes::{mesh_name, primitive_mesh};
 
 /// Deepest node hierarchy accepted.
@@ -402,80 +407,4 @@ fn check_world_bounds(mesh: &Mesh, world: &Affine3A, node: &str) -> Result<(), S
         }
     }
     Ok(())
-}
-
-fn convert_light(
-    light: &gltf::khr_lights_punctual::Light,
-    node: &str,
-    transform: Transform,
-) -> Result<LightDesc, String> {
-    use gltf::khr_lights_punctual::Kind;
-    let label = match light.name() {
-        Some(name) => format!("light {} ('{name}') at {node}", light.index()),
-        None => format!("light {} at {node}", light.index()),
-    };
-    let color = Vec3::from(light.color());
-    check_color(color, "colour", &label)?;
-    let intensity = light.intensity();
-    check_factor(intensity, "intensity", &label)?;
-    let value = color * intensity;
-    check_color(value, "colour times intensity", &label)?;
-    let light_value = match light.kind() {
-        Kind::Point => Light::Point { intensity: value },
-        Kind::Directional => Light::Directional { illuminance: value },
-        Kind::Spot {
-            inner_cone_angle,
-            outer_cone_angle,
-        } => {
-            if !(inner_cone_angle.is_finite() && outer_cone_angle.is_finite()) {
-                return Err(format!("{label}: spot cone angles are not finite"));
-            }
-            Light::Spot {
-                intensity: value,
-                inner_angle: inner_cone_angle,
-                outer_angle: outer_cone_angle,
-            }
-        }
-    };
-    Ok(LightDesc {
-        name: light.name().map(str::to_string),
-        transform,
-        light: light_value,
-    })
-}
-
-fn convert_camera(
-    st: &mut State,
-    camera: &gltf::Camera,
-    node: &str,
-    world: Affine3A,
-) -> Result<Option<Camera>, String> {
-    let label = match camera.name() {
-        Some(name) => format!("camera {} ('{name}') at {node}", camera.index()),
-        None => format!("camera {} at {node}", camera.index()),
-    };
-    let yfov = match camera.projection() {
-        gltf::camera::Projection::Perspective(p) => p.yfov(),
-        gltf::camera::Projection::Orthographic(_) => {
-            st.warn(format!(
-                "{label} is orthographic; skipped (the renderer is pinhole only)"
-            ));
-            return Ok(None);
-        }
-    };
-    if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
-        return Err(format!("{label}: yfov {yfov} is not in (0, pi) radians"));
-    }
-    let position = Vec3::from(world.translation);
-    let forward = Vec3::from(world.matrix3.mul_vec3a(Vec3A::NEG_Z)).normalize_or_zero();
-    let up = Vec3::from(world.matrix3.mul_vec3a(Vec3A::Y)).normalize_or_zero();
-    let result = Camera {
-        look_from: position,
-        look_at: position + forward,
-        up,
-        vfov_degrees: yfov.to_degrees(),
-        name: camera.name().map(str::to_string),
-    };
-    result.validate().map_err(|e| format!("{label}: {e}"))?;
-    Ok(Some(result))
 }

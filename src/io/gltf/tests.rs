@@ -4,7 +4,7 @@
 use super::container::{base64_decode, has_scheme, percent_decode_str};
 use super::*;
 use crate::image::output::srgb_to_linear;
-use crate::scene::light::WorldLight;
+use crate::scene::light::{Light, WorldLight};
 use crate::scene::material::Texture;
 use glam::Vec2;
 use serde_json::{Value, json};
