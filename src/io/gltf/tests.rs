@@ -2,11 +2,13 @@
 //! small documents written by the tests.
 
 use super::container::{base64_decode, has_scheme, percent_decode_str};
+use super::nodes::MAX_DEPTH;
 use super::*;
 use crate::image::output::srgb_to_linear;
+use crate::io::desc::{Geometry, ObjectDesc};
 use crate::scene::light::{Light, WorldLight};
 use crate::scene::material::Texture;
-use glam::Vec2;
+use glam::{Vec2, Vec3, Vec3A};
 use serde_json::{Value, json};
 
 fn b64(bytes: &[u8]) -> String {
