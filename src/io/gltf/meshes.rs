@@ -1,0 +1,133 @@
+//! Meshes: each triangle primitive becomes one shared [`Mesh`] (strips
+//! and fans become triangle lists; points and lines are skipped).
+
+use std::sync::Arc;
+
+use gltf::mesh::{Mode, Semantic};
+
+use crate::geometry::mesh::{MAX_COORDINATE, Mesh, MeshData, NormalMode};
+
+use super::accessors::{read_indices, read_vec2, read_vec3};
+use super::{Ctx, State};
+
+/// The shared mesh of one primitive, or `None` when it has nothing to
+/// render (points, lines, no triangles).
+pub(super) fn primitive_mesh(
+    ctx: &Ctx,
+    st: &mut State,
+    mesh: &gltf::Mesh,
+    primitive: &gltf::Primitive,
+) -> Result<Option<Arc<Mesh>>, String> {
+    let key = (mesh.index(), primitive.index());
+    if let Some(cached) = st.meshes.get(&key) {
+        return Ok(cached.clone());
+    }
+    let built = build_primitive(ctx, st, mesh, primitive)?.map(Arc::new);
+    st.meshes.insert(key, built.clone());
+    Ok(built)
+}
+
+pub(super) fn mesh_name(mesh: &gltf::Mesh) -> String {
+    match mesh.name() {
+        Some(name) => name.to_string(),
+        None => format!("mesh {}", mesh.index()),
+    }
+}
+
+fn build_primitive(
+    ctx: &Ctx,
+    st: &mut State,
+    mesh: &gltf::Mesh,
+    primitive: &gltf::Primitive,
+) -> Result<Option<Mesh>, String> {
+    let name = mesh_name(mesh);
+    let pi = primitive.index();
+    let fail = |e: String| format!("mesh '{name}' primitive {pi}: {e}");
+    let mode = primitive.mode();
+    if matches!(
+        mode,
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+    ) {
+        st.skipped_primitives += 1;
+        return Ok(None);
+    }
+    let positions = match primitive.get(&Semantic::Positions) {
+        Some(a) => read_vec3(ctx, &a).map_err(|e| fail(format!("POSITION: {e}")))?,
+        None => return Err(fail("no POSITION attribute".into())),
+    };
+    if let Some((i, p)) = positions
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.is_finite() && p.abs().max_element() > MAX_COORDINATE)
+    {
+        return Err(fail(format!(
+            "vertex {i} position {p} is farther than {MAX_COORDINATE:e} from the origin"
+        )));
+    }
+    let normals = match primitive.get(&Semantic::Normals) {
+        Some(a) => Some(read_vec3(ctx, &a).map_err(|e| fail(format!("NORMAL: {e}")))?),
+        None => None,
+    };
+    let uvs = match primitive.get(&Semantic::TexCoords(0)) {
+        Some(a) => Some(read_vec2(ctx, &a).map_err(|e| fail(format!("TEXCOORD_0: {e}")))?),
+        None => None,
+    };
+    let indices = match primitive.indices() {
+        Some(a) => read_indices(ctx, &a).map_err(|e| fail(format!("indices: {e}")))?,
+        None => {
+            let n = u32::try_from(positions.len())
+                .map_err(|_| fail(format!("{} vertices is too many", positions.len())))?;
+            (0..n).collect()
+        }
+    };
+    let triangles = triangulate(mode, &indices);
+    if triangles.is_empty() || positions.is_empty() {
+        st.warn(format!(
+            "mesh '{name}' primitive {pi} has no triangles; skipped"
+        ));
+        return Ok(None);
+    }
+    let normal_mode = if normals.is_some() {
+        NormalMode::Smooth
+    } else {
+        NormalMode::Flat
+    };
+    let label = if mesh.primitives().len() > 1 {
+        format!("{name}/{pi}")
+    } else {
+        name.clone()
+    };
+    let data = MeshData {
+        positions,
+        normals,
+        uvs,
+        indices: triangles,
+    };
+    Mesh::new(label, data, normal_mode, st.quality)
+        .map(Some)
+        .map_err(fail)
+}
+
+/// Converts an index list of the given mode to triangles (glTF's vertex
+/// order for strips and fans).
+fn triangulate(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => idx
+            .windows(3)
+            .enumerate()
+            .map(|(i, w)| {
+                if i % 2 == 0 {
+                    [w[0], w[1], w[2]]
+                } else {
+                    [w[0], w[2], w[1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => match idx.split_first() {
+            Some((&first, rest)) => rest.windows(2).map(|w| [w[0], w[1], first]).collect(),
+            None => Vec::new(),
+        },
+        _ => Vec::new(),
+    }
+}

@@ -1,0 +1,239 @@
+//! The scene graph: the node hierarchy is checked for cycles, walked
+//! depth first with composed world transforms, and each node's meshes,
+//! light and camera are added to the scene.
+
+use glam::{Affine3A, Mat4, Quat, Vec3, Vec3A};
+
+use crate::geometry::mesh::{BuildQuality, MAX_COORDINATE, Mesh};
+use crate::geometry::transform::Transform;
+use crate::io::desc::{Geometry, ObjectDesc, SceneDesc};
+
+use super::lights_cameras::{convert_camera, convert_light};
+use super::materials::material;
+use super::meshes::{mesh_name, primitive_mesh};
+use super::{Ctx, State};
+
+/// Deepest node hierarchy accepted.
+pub(super) const MAX_DEPTH: usize = 1024;
+/// Most node visits in one traversal (guards against node DAGs whose
+/// expansion into a tree is exponentially large).
+const MAX_NODE_VISITS: usize = 1 << 22;
+
+fn node_label(node: &gltf::Node) -> String {
+    match node.name() {
+        Some(name) => format!("node {} ('{name}')", node.index()),
+        None => format!("node {}", node.index()),
+    }
+}
+
+/// The node's local transform. TRS quaternions are normalised; the last
+/// row of a matrix is ignored (glTF requires it to be `0 0 0 1`).
+fn local_transform(node: &gltf::Node, label: &str) -> Result<Affine3A, String> {
+    let local = match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            Affine3A::from_mat4(Mat4::from_cols_array_2d(&matrix))
+        }
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let rotation = Quat::from_array(rotation);
+            let length = rotation.length();
+            if !(length.is_finite() && length > 0.0) {
+                return Err(format!(
+                    "{label}: rotation {rotation} is not a valid quaternion"
+                ));
+            }
+            Affine3A::from_scale_rotation_translation(
+                Vec3::from(scale),
+                rotation / length,
+                Vec3::from(translation),
+            )
+        }
+    };
+    if !local.is_finite() {
+        return Err(format!("{label}: transform is not finite"));
+    }
+    Ok(local)
+}
+
+/// Fails if any node is its own ancestor.
+fn check_cycles(nodes: &[gltf::Node]) -> Result<(), String> {
+    let children: Vec<Vec<usize>> = nodes
+        .iter()
+        .map(|n| n.children().map(|c| c.index()).collect())
+        .collect();
+    // 0 = unvisited, 1 = on the current path, 2 = done.
+    let mut state = vec![0u8; nodes.len()];
+    for start in 0..nodes.len() {
+        if state[start] != 0 {
+            continue;
+        }
+        state[start] = 1;
+        let mut stack: Vec<(usize, usize)> = vec![(start, 0)];
+        while let Some(top) = stack.last_mut() {
+            let (v, next) = *top;
+            top.1 += 1;
+            match children.get(v).and_then(|c| c.get(next)) {
+                Some(&c) => match state.get(c) {
+                    Some(0) => {
+                        state[c] = 1;
+                        stack.push((c, 0));
+                    }
+                    Some(1) => {
+                        let name =
+                            |i: usize| nodes.get(i).map_or_else(|| format!("node {i}"), node_label);
+                        return Err(if v == c {
+                            format!(
+                                "the node hierarchy has a cycle: {} lists itself as a child",
+                                name(v)
+                            )
+                        } else {
+                            format!(
+                                "the node hierarchy has a cycle: {} lists {} as a child, \
+                                 but that node is also its ancestor",
+                                name(v),
+                                name(c)
+                            )
+                        });
+                    }
+                    _ => {}
+                },
+                None => {
+                    state[v] = 2;
+                    stack.pop();
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Walks the scene and assembles the description.
+pub(super) fn build_scene(
+    ctx: &Ctx,
+    st: &mut State,
+    quality: BuildQuality,
+) -> Result<SceneDesc, String> {
+    st.quality = quality;
+    let doc = &ctx.document;
+    let nodes: Vec<gltf::Node> = doc.nodes().collect();
+    check_cycles(&nodes)?;
+    let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().map(|n| n.index()).collect(),
+        None => {
+            let mut is_child = vec![false; nodes.len()];
+            for n in &nodes {
+                for c in n.children() {
+                    if let Some(flag) = is_child.get_mut(c.index()) {
+                        *flag = true;
+                    }
+                }
+            }
+            (0..nodes.len()).filter(|&i| !is_child[i]).collect()
+        }
+    };
+
+    let mut scene = SceneDesc::default();
+    let mut stack: Vec<(usize, Affine3A, usize)> = roots
+        .iter()
+        .rev()
+        .map(|&i| (i, Affine3A::IDENTITY, 0))
+        .collect();
+    let mut visits = 0usize;
+    while let Some((index, parent, depth)) = stack.pop() {
+        let node = nodes
+            .get(index)
+            .ok_or_else(|| format!("node {index} does not exist"))?;
+        let label = node_label(node);
+        if depth >= MAX_DEPTH {
+            return Err(format!(
+                "{label}: node hierarchy is deeper than {MAX_DEPTH} levels"
+            ));
+        }
+        visits += 1;
+        if visits > MAX_NODE_VISITS {
+            return Err(format!(
+                "the node hierarchy expands to more than {MAX_NODE_VISITS} node instances"
+            ));
+        }
+        let local = local_transform(node, &label)?;
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(format!("{label}: world transform is not finite"));
+        }
+        visit_node(ctx, st, &mut scene, node, &label, world)?;
+        let children: Vec<usize> = node.children().map(|c| c.index()).collect();
+        for &c in children.iter().rev() {
+            stack.push((c, world, depth + 1));
+        }
+    }
+    Ok(scene)
+}
+
+/// Adds a node's meshes, light and camera.
+fn visit_node(
+    ctx: &Ctx,
+    st: &mut State,
+    scene: &mut SceneDesc,
+    node: &gltf::Node,
+    label: &str,
+    world: Affine3A,
+) -> Result<(), String> {
+    let transform = Transform(world);
+    if let Some(mesh) = node.mesh() {
+        if transform.is_valid() {
+            for primitive in mesh.primitives() {
+                let Some(geometry) = primitive_mesh(ctx, st, &mesh, &primitive)? else {
+                    continue;
+                };
+                check_world_bounds(&geometry, &world, label)?;
+                let material = material(ctx, st, &primitive.material())?;
+                scene.objects.push(ObjectDesc {
+                    name: Some(node.name().map_or_else(|| mesh_name(&mesh), str::to_string)),
+                    transform,
+                    geometry: Geometry::Mesh(geometry),
+                    material,
+                });
+            }
+        } else {
+            st.warn(format!(
+                "{label}: transform is not invertible (zero scale?); its mesh is skipped"
+            ));
+        }
+    }
+    if let Some(light) = node.light() {
+        scene.lights.push(convert_light(&light, label, transform)?);
+    }
+    if let Some(camera) = node.camera()
+        && let Some(c) = convert_camera(st, &camera, label, world)?
+    {
+        scene.cameras.push(c);
+    }
+    Ok(())
+}
+
+/// Fails if a mesh placed by `world` reaches farther than
+/// [`MAX_COORDINATE`] from the origin.
+fn check_world_bounds(mesh: &Mesh, world: &Affine3A, node: &str) -> Result<(), String> {
+    let Some((lo, hi)) = mesh.bounds() else {
+        return Ok(());
+    };
+    for i in 0..8 {
+        let corner = Vec3A::select(
+            glam::BVec3A::new(i & 1 != 0, i & 2 != 0, i & 4 != 0),
+            hi,
+            lo,
+        );
+        let p = world.transform_point3a(corner);
+        if !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE) {
+            return Err(format!(
+                "{node}: mesh '{}' reaches farther than {MAX_COORDINATE:e} from the origin \
+                 in world space",
+                mesh.name
+            ));
+        }
+    }
+    Ok(())
+}
