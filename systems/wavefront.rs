@@ -20,10 +20,11 @@ use bevy_ecs::schedule::ScheduleLabel;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
+use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowSegments};
 use crate::integrators::wavefront::{
-    self as kernels, ClassQueues, PixelSums, RoutingScratch, ShadeScratch, ShadowScratch,
-    StageSeconds, WavefrontReport,
+    self as kernels, ClassQueues, RoutingScratch, ShadeScratch, ShadowScratch, StageSeconds,
+    WavefrontReport,
 };
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
@@ -83,7 +84,7 @@ pub struct PathRadiance(pub Vec<Color>);
 
 /// Per-pixel sums across batches.
 #[derive(Resource, Default)]
-pub struct PixelAccumulator(pub PixelSums);
+pub struct PixelSums(pub PixelAccumulator);
 
 /// Reusable per-ray scratch buffers of the intersection stages.
 #[derive(Resource, Default)]
@@ -208,7 +209,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<HitQueues>();
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathRadiance>();
-    world.init_resource::<PixelAccumulator>();
+    world.init_resource::<PixelSums>();
     world.init_resource::<StageScratch>();
     world.init_resource::<WavefrontStats>();
     world.init_resource::<BatchSize>();
@@ -380,7 +381,7 @@ pub fn update_film(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
-    mut pixels: ResMut<PixelAccumulator>,
+    mut pixels: ResMut<PixelSums>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     let (first, _) = frame.batches[frame.batch];
@@ -410,7 +411,6 @@ pub fn render_wavefront(world: &mut World) {
     let shadows = features.needs_shadow_rays(settings.transport);
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = kernels::batch_ranges(settings, batch_size).collect();
-    let pixel_count = settings.width as usize * settings.height as usize;
     world.insert_resource(WavefrontFrame {
         scene,
         camera: CameraRays::new(&camera, settings.width, settings.height),
@@ -420,7 +420,10 @@ pub fn render_wavefront(world: &mut World) {
         features,
         shadows,
     });
-    world.insert_resource(PixelAccumulator(PixelSums::new(pixel_count)));
+    world.insert_resource(PixelSums(PixelAccumulator::new(
+        settings.width,
+        settings.height,
+    )));
     world.insert_resource(WavefrontStats::default());
 
     let start = Instant::now();
@@ -440,10 +443,7 @@ pub fn render_wavefront(world: &mut World) {
         }
     }
     let render_seconds = start.elapsed().as_secs_f64();
-    let film = world
-        .resource::<PixelAccumulator>()
-        .0
-        .resolve(settings.width, settings.height);
+    let film = world.resource::<PixelSums>().0.resolve();
     let mut report = world.resource::<WavefrontStats>().0;
     report.batches = batches.len();
     let mut frame = world.resource_mut::<Frame>();

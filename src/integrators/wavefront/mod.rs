@@ -25,7 +25,7 @@ use crate::core::math::Ray;
 use crate::core::math::{Color, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Transport};
-use crate::image::film::Film;
+use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
     EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
     ShadowSegments,
@@ -590,34 +590,6 @@ pub fn trace_shadow_rays(
     }
 }
 
-/// Per-pixel sums over samples, across batches.
-#[derive(Clone, Debug, Default)]
-pub struct PixelSums {
-    /// Sum of finite samples per pixel.
-    pub sum: Vec<Color>,
-    /// Number of finite samples per pixel.
-    pub valid: Vec<u32>,
-}
-
-impl PixelSums {
-    /// Zeroed sums for `pixels` pixels.
-    pub fn new(pixels: usize) -> Self {
-        Self {
-            sum: vec![Color::ZERO; pixels],
-            valid: vec![0; pixels],
-        }
-    }
-
-    /// The averaged image.
-    pub fn resolve(&self, width: u32, height: u32) -> Film {
-        let mut film = Film::new(width, height);
-        for ((px, s), &n) in film.pixels.iter_mut().zip(&self.sum).zip(&self.valid) {
-            *px = if n > 0 { *s / n as f32 } else { Color::ZERO };
-        }
-        film
-    }
-}
-
 /// Stage: adds each finished path of the batch to its pixel, in path
 /// order (so samples are summed in the same order as the recursive
 /// tracer sums them), dropping and counting non-finite samples.
@@ -625,12 +597,13 @@ pub fn update_film(
     radiance: &[Color],
     first: u64,
     spp: u32,
-    sums: &mut PixelSums,
+    sums: &mut PixelAccumulator,
     counters: &mut RenderCounters,
 ) {
+    let pixels = sums.pixels_mut();
     for (local, &l) in radiance.iter().enumerate() {
         let pixel = ((first + local as u64) / spp as u64) as usize;
-        accumulate(&mut sums.sum[pixel], &mut sums.valid[pixel], l, counters);
+        accumulate(&mut pixels[pixel], l, counters);
     }
 }
 
