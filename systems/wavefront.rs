@@ -1,30 +1,41 @@
 //! The wavefront integrator as ECS stage systems.
 //!
 //! Each queue is its own resource, so a system's signature shows exactly
-//! the data it reads and writes. The algorithm is declared once, in
-//! [`add_wavefront_schedules`]:
+//! the data it reads and writes; the hit queues are one resource per
+//! material class, [`Hits<C>`] for the class's marker type `C`. The
+//! algorithm is declared once, in [`add_wavefront_schedules`]:
 //!
 //! * per batch of paths: [`generate_camera_rays`];
 //! * per bounce, until no ray is left: [`intersect_closest`] ->
-//!   [`handle_escaped_rays`] -> `shade_*` (one system per material class)
-//!   -> [`trace_shadow_rays`] -> [`advance_bounce`];
+//!   [`handle_escaped_rays`] -> [`shade_emissive`], [`shade_diffuse`],
+//!   [`shade_mirror`], [`shade_glass`], [`shade_general`] (one system per
+//!   material class) -> [`trace_shadow_rays`] -> [`record_queue_bytes`]
+//!   -> [`advance_bounce`];
 //! * per batch, at the end: [`update_film`].
 //!
-//! [`render_wavefront`] drives these schedules for one frame.
+//! Each stage system is named after its [`Stage`], under which it counts
+//! its runs and time. [`render_wavefront`] drives these schedules for one
+//! frame.
 
+use std::marker::PhantomData;
 use std::sync::Arc;
 use std::time::Instant;
 
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleLabel;
+use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
-use crate::integrators::wavefront::queues::{EscapedQueue, QueueBytes, RayQueue, ShadowSegments};
-use crate::integrators::wavefront::{
-    self as kernels, ClassQueues, PixelSums, RoutingScratch, ShadeScratch, ShadowScratch,
-    StageSeconds, WavefrontReport,
+use crate::image::film::PixelAccumulator;
+use crate::integrators::wavefront::queues::{
+    EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
 };
+use crate::integrators::wavefront::routing::{ClassHitQueues, ShadeTargets};
+use crate::integrators::wavefront::stages::{
+    self as kernels, RoutingScratch, ShadeScratch, ShadowScratch,
+};
+use crate::integrators::wavefront::{self, Stage, StageSeconds, WavefrontReport};
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::features::SceneFeatures;
@@ -53,7 +64,7 @@ pub enum WavefrontSystems {
     ShadeMaterials,
     /// Shadow rays, stopping at the first blocker.
     TraceShadowRays,
-    /// Clearing drained queues and swapping the ray queues.
+    /// Recording queue memory, then swapping the ray queues.
     AdvanceBounce,
 }
 
@@ -69,9 +80,116 @@ pub struct NextRays(pub RayQueue);
 #[derive(Resource, Default)]
 pub struct EscapedRays(pub EscapedQueue);
 
-/// Hits of this bounce, one queue per material class.
-#[derive(Resource, Default)]
-pub struct HitQueues(pub ClassQueues);
+/// A material class as a type: its hits are the resource [`Hits<C>`] and
+/// its shading stage is a system of its own.
+pub trait ClassMarker: Send + Sync + 'static {
+    /// The class.
+    const CLASS: MaterialClass;
+}
+
+/// Hits of this bounce on materials of class `C`.
+#[derive(Resource)]
+pub struct Hits<C: ClassMarker>(pub HitQueue, PhantomData<C>);
+
+impl<C: ClassMarker> Default for Hits<C> {
+    fn default() -> Self {
+        Self(HitQueue::default(), PhantomData)
+    }
+}
+
+/// Declares, from one list of the material classes, their marker types,
+/// the system parameters that reach every class's hit queue, and the
+/// functions that reach one class's queue in a world.
+macro_rules! class_hit_queues {
+    ($($class:ident: $field:ident),+ $(,)?) => {
+        $(
+            #[doc = concat!(
+                "Marker of [`MaterialClass::", stringify!($class),
+                "`]: its hits are [`Hits<", stringify!($class), ">`]."
+            )]
+            #[derive(Clone, Copy, Debug, Default)]
+            pub struct $class;
+
+            impl ClassMarker for $class {
+                const CLASS: MaterialClass = MaterialClass::$class;
+            }
+        )+
+
+        /// Every material class's hit queue, to read.
+        #[derive(SystemParam)]
+        pub struct HitQueues<'w> {
+            $(
+                #[doc = concat!("Hits on ", stringify!($field), " materials.")]
+                pub $field: Res<'w, Hits<$class>>,
+            )+
+        }
+
+        impl HitQueues<'_> {
+            /// The hit queue of `class`.
+            pub fn get(&self, class: MaterialClass) -> &HitQueue {
+                match class {
+                    $(MaterialClass::$class => &self.$field.0,)+
+                }
+            }
+        }
+
+        /// Every material class's hit queue, to route hits to.
+        #[derive(SystemParam)]
+        pub struct HitQueuesMut<'w> {
+            $(
+                #[doc = concat!("Hits on ", stringify!($field), " materials.")]
+                pub $field: ResMut<'w, Hits<$class>>,
+            )+
+        }
+
+        impl ClassHitQueues for HitQueuesMut<'_> {
+            fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue {
+                match class {
+                    $(MaterialClass::$class => &mut self.$field.0,)+
+                }
+            }
+        }
+
+        /// The hit queue of `class` in `world`.
+        pub fn hit_queue(world: &World, class: MaterialClass) -> &HitQueue {
+            match class {
+                $(MaterialClass::$class => &world.resource::<Hits<$class>>().0,)+
+            }
+        }
+
+        /// The hit queue of `class` in `world`, to change.
+        pub fn hit_queue_mut(world: &mut World, class: MaterialClass) -> Mut<'_, HitQueue> {
+            match class {
+                $(MaterialClass::$class => world
+                    .resource_mut::<Hits<$class>>()
+                    .map_unchanged(|h| &mut h.0),)+
+            }
+        }
+
+        /// Inserts an empty hit queue for every class.
+        fn init_hit_queues(world: &mut World) {
+            $(world.init_resource::<Hits<$class>>();)+
+        }
+    };
+}
+
+class_hit_queues!(
+    Emissive: emissive,
+    Diffuse: diffuse,
+    Mirror: mirror,
+    Glass: glass,
+    General: general,
+);
+
+impl HitQueues<'_> {
+    /// Bytes allocated by all hit queues.
+    pub fn bytes(&self) -> usize {
+        MaterialClass::ALL
+            .iter()
+            .map(|&c| self.get(c).bytes())
+            .sum()
+    }
+}
 
 /// Shadow rays of this bounce.
 #[derive(Resource, Default)]
@@ -83,9 +201,9 @@ pub struct PathRadiance(pub Vec<Color>);
 
 /// Per-pixel sums across batches.
 #[derive(Resource, Default)]
-pub struct PixelAccumulator(pub PixelSums);
+pub struct PixelSums(pub PixelAccumulator);
 
-/// Reusable per-ray scratch buffers of the intersection stages.
+/// Reusable per-chunk scratch buffers of the parallel stages.
 #[derive(Resource, Default)]
 pub struct StageScratch {
     routing: RoutingScratch,
@@ -103,6 +221,13 @@ impl StageScratch {
     /// Bytes the shading stages hold for refraction rays.
     pub fn refraction_bytes(&self) -> usize {
         self.shading.iter().map(|s| s.refraction_bytes()).sum()
+    }
+
+    /// Bytes allocated by all scratch buffers.
+    pub fn bytes(&self) -> usize {
+        self.routing.iter().map(|c| c.bytes()).sum::<usize>()
+            + self.shadows.bytes()
+            + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
 }
 
@@ -147,14 +272,8 @@ pub struct StageGating {
 
 impl Default for BatchSize {
     fn default() -> Self {
-        Self(kernels::DEFAULT_BATCH_PATHS)
+        Self(wavefront::DEFAULT_BATCH_PATHS)
     }
-}
-
-fn timed(slot: &mut f64, f: impl FnOnce()) {
-    let start = Instant::now();
-    f();
-    *slot += start.elapsed().as_secs_f64();
 }
 
 /// Declares the wavefront's schedules: the whole algorithm in one place.
@@ -177,23 +296,20 @@ pub fn add_wavefront_schedules(world: &mut World) {
         intersect_closest.in_set(WavefrontSystems::IntersectClosest),
         handle_escaped_rays.in_set(WavefrontSystems::HandleEscapedRays),
         (
-            shade_class_system::<{ MaterialClass::Emissive as u8 }>
-                .run_if(class_present::<{ MaterialClass::Emissive as u8 }>),
-            shade_class_system::<{ MaterialClass::Diffuse as u8 }>
-                .run_if(class_present::<{ MaterialClass::Diffuse as u8 }>),
-            shade_class_system::<{ MaterialClass::Mirror as u8 }>
-                .run_if(class_present::<{ MaterialClass::Mirror as u8 }>),
-            shade_class_system::<{ MaterialClass::Glass as u8 }>
-                .run_if(class_present::<{ MaterialClass::Glass as u8 }>),
-            shade_class_system::<{ MaterialClass::General as u8 }>
-                .run_if(class_present::<{ MaterialClass::General as u8 }>),
+            shade_emissive.run_if(class_present::<Emissive>),
+            shade_diffuse.run_if(class_present::<Diffuse>),
+            shade_mirror.run_if(class_present::<Mirror>),
+            shade_glass.run_if(class_present::<Glass>),
+            shade_general.run_if(class_present::<General>),
         )
             .chain()
             .in_set(WavefrontSystems::ShadeMaterials),
         trace_shadow_rays
             .run_if(shadows_possible)
             .in_set(WavefrontSystems::TraceShadowRays),
-        advance_bounce.in_set(WavefrontSystems::AdvanceBounce),
+        (record_queue_bytes, advance_bounce)
+            .chain()
+            .in_set(WavefrontSystems::AdvanceBounce),
     ));
 
     let mut finish = Schedule::new(FinishBatch);
@@ -205,23 +321,19 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<CurrentRays>();
     world.init_resource::<NextRays>();
     world.init_resource::<EscapedRays>();
-    world.init_resource::<HitQueues>();
+    init_hit_queues(world);
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathRadiance>();
-    world.init_resource::<PixelAccumulator>();
+    world.init_resource::<PixelSums>();
     world.init_resource::<StageScratch>();
     world.init_resource::<WavefrontStats>();
     world.init_resource::<BatchSize>();
     world.init_resource::<StageGating>();
 }
 
-fn class_from_u8(c: u8) -> MaterialClass {
-    MaterialClass::ALL[c as usize]
-}
-
 /// Run condition: the scene has a material of class `C`.
-pub fn class_present<const C: u8>(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
-    gating.force_all || frame.features.classes[C as usize]
+pub fn class_present<C: ClassMarker>(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
+    gating.force_all || frame.features.has(C::CLASS)
 }
 
 /// Run condition: the scene can produce shadow rays.
@@ -238,9 +350,7 @@ pub fn generate_camera_rays(
     mut stats: ResMut<WavefrontStats>,
 ) {
     let (first, count) = frame.batches[frame.batch];
-    let stats = &mut stats.0;
-    stats.runs.generate_camera_rays += 1;
-    timed(&mut stats.stages.generate_camera_rays, || {
+    stats.0.run_stage(Stage::GenerateCameraRays, |counters| {
         radiance.0.clear();
         radiance.0.resize(count, Color::ZERO);
         kernels::generate_camera_rays(
@@ -249,7 +359,7 @@ pub fn generate_camera_rays(
             first,
             count,
             &mut rays.0,
-            &mut stats.counters.rays,
+            &mut counters.rays,
         );
     });
 }
@@ -260,18 +370,17 @@ pub fn intersect_closest(
     rays: Res<CurrentRays>,
     mut scratch: ResMut<StageScratch>,
     mut escaped: ResMut<EscapedRays>,
-    mut hits: ResMut<HitQueues>,
+    mut hits: HitQueuesMut,
     mut stats: ResMut<WavefrontStats>,
 ) {
-    stats.0.runs.intersect_closest += 1;
-    timed(&mut stats.0.stages.intersect_closest, || {
+    stats.0.run_stage(Stage::IntersectClosest, |_| {
         kernels::intersect_closest(
             &frame.scene,
             &frame.classes,
             &rays.0,
             &mut scratch.routing,
             &mut escaped.0,
-            &mut hits.0,
+            &mut hits,
         )
     });
 }
@@ -283,45 +392,81 @@ pub fn handle_escaped_rays(
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
-    stats.0.runs.handle_escaped_rays += 1;
-    timed(&mut stats.0.stages.handle_escaped_rays, || {
+    stats.0.run_stage(Stage::HandleEscapedRays, |_| {
         kernels::handle_escaped_rays(&escaped.0, frame.scene.background, &mut radiance.0);
         escaped.0.clear();
     });
 }
 
-/// Stage: shades the hits of material class `C`; drains that queue.
-#[allow(clippy::too_many_arguments)]
-pub fn shade_class_system<const C: u8>(
-    config: Res<RenderConfig>,
-    frame: Res<WavefrontFrame>,
-    mut hits: ResMut<HitQueues>,
-    mut scratch: ResMut<StageScratch>,
-    mut radiance: ResMut<PathRadiance>,
-    mut shadows: ResMut<ShadowRays>,
-    mut next: ResMut<NextRays>,
-    mut stats: ResMut<WavefrontStats>,
-) {
-    let class = class_from_u8(C);
+/// What a shading system reads and writes besides its class's hits.
+#[derive(SystemParam)]
+pub struct ShadeParams<'w> {
+    config: Res<'w, RenderConfig>,
+    frame: Res<'w, WavefrontFrame>,
+    scratch: ResMut<'w, StageScratch>,
+    radiance: ResMut<'w, PathRadiance>,
+    shadows: ResMut<'w, ShadowRays>,
+    next: ResMut<'w, NextRays>,
+    stats: ResMut<'w, WavefrontStats>,
+}
+
+/// The body of every shading system: shades the hits of class `C` and
+/// drains that queue.
+fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
+    let ShadeParams {
+        config,
+        frame,
+        mut scratch,
+        mut radiance,
+        mut shadows,
+        mut next,
+        mut stats,
+    } = params;
     let first = frame.batches[frame.batch].0;
-    let stats = &mut stats.0;
-    *stats.runs.shade_mut(class) += 1;
-    timed(&mut stats.stages.shade, || {
-        let queue = &mut hits.0.queues[C as usize];
+    stats.0.run_stage(Stage::shade(C::CLASS), |counters| {
+        let to = ShadeTargets {
+            radiance: &mut radiance.0,
+            shadows: &mut shadows.0,
+            next: &mut next.0,
+            rays: &mut counters.rays,
+        };
         kernels::shade_class(
-            class,
+            C::CLASS,
             &frame.scene,
             &config.settings,
             first,
-            queue,
+            &hits.0,
             &mut scratch.shading,
-            &mut radiance.0,
-            &mut shadows.0,
-            &mut next.0,
-            &mut stats.counters.rays,
+            to,
         );
-        queue.clear();
+        hits.0.clear();
     });
+}
+
+/// Stage: shades the hits on emissive-only materials; drains their queue.
+pub fn shade_emissive(hits: ResMut<Hits<Emissive>>, params: ShadeParams) {
+    shade_stage(hits, params)
+}
+
+/// Stage: shades the hits on diffuse/glossy materials; drains their queue.
+pub fn shade_diffuse(hits: ResMut<Hits<Diffuse>>, params: ShadeParams) {
+    shade_stage(hits, params)
+}
+
+/// Stage: shades the hits on mirrors; drains their queue.
+pub fn shade_mirror(hits: ResMut<Hits<Mirror>>, params: ShadeParams) {
+    shade_stage(hits, params)
+}
+
+/// Stage: shades the hits on glass; drains their queue.
+pub fn shade_glass(hits: ResMut<Hits<Glass>>, params: ShadeParams) {
+    shade_stage(hits, params)
+}
+
+/// Stage: shades the hits on materials with several lobes; drains their
+/// queue.
+pub fn shade_general(hits: ResMut<Hits<General>>, params: ShadeParams) {
+    shade_stage(hits, params)
 }
 
 /// Stage: traces the shadow rays; drains the shadow queue.
@@ -332,8 +477,7 @@ pub fn trace_shadow_rays(
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
-    stats.0.runs.trace_shadow_rays += 1;
-    timed(&mut stats.0.stages.trace_shadow_rays, || {
+    stats.0.run_stage(Stage::TraceShadowRays, |_| {
         kernels::trace_shadow_rays(
             &frame.scene,
             &shadows.0,
@@ -344,13 +488,14 @@ pub fn trace_shadow_rays(
     });
 }
 
-/// Stage: the next bounce's rays become current; records peak memory.
+/// Bookkeeping at the end of a bounce: records the largest total of bytes
+/// the queues and scratch buffers have held.
 #[allow(clippy::too_many_arguments)]
-pub fn advance_bounce(
-    mut rays: ResMut<CurrentRays>,
-    mut next: ResMut<NextRays>,
+pub fn record_queue_bytes(
+    rays: Res<CurrentRays>,
+    next: Res<NextRays>,
     escaped: Res<EscapedRays>,
-    hits: Res<HitQueues>,
+    hits: HitQueues,
     shadows: Res<ShadowRays>,
     scratch: Res<StageScratch>,
     radiance: Res<PathRadiance>,
@@ -359,17 +504,19 @@ pub fn advance_bounce(
     let bytes = rays.0.bytes()
         + next.0.bytes()
         + escaped.0.bytes()
-        + hits.0.bytes()
+        + hits.bytes()
         + shadows.0.bytes()
-        + scratch
-            .routing
-            .iter()
-            .map(|(e, h, s)| e.bytes() + h.bytes() + s.bytes())
-            .sum::<usize>()
-        + scratch.shadows.bytes()
-        + scratch.shading.iter().map(|s| s.bytes()).sum::<usize>()
+        + scratch.bytes()
         + radiance.0.capacity() * std::mem::size_of::<Color>();
     stats.0.peak_queue_bytes = stats.0.peak_queue_bytes.max(bytes);
+}
+
+/// The next bounce's rays become current.
+pub fn advance_bounce(
+    mut rays: ResMut<CurrentRays>,
+    mut next: ResMut<NextRays>,
+    shadows: Res<ShadowRays>,
+) {
     debug_assert!(shadows.0.is_empty(), "shadow rays left untraced");
     std::mem::swap(&mut rays.0, &mut next.0);
     next.0.clear();
@@ -380,19 +527,17 @@ pub fn update_film(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
-    mut pixels: ResMut<PixelAccumulator>,
+    mut pixels: ResMut<PixelSums>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     let (first, _) = frame.batches[frame.batch];
-    let stats = &mut stats.0;
-    stats.runs.update_film += 1;
-    timed(&mut stats.stages.update_film, || {
+    stats.0.run_stage(Stage::UpdateFilm, |counters| {
         kernels::update_film(
             &radiance.0,
             first,
             config.settings.spp,
             &mut pixels.0,
-            &mut stats.counters,
+            counters,
         )
     });
 }
@@ -409,8 +554,7 @@ pub fn render_wavefront(world: &mut World) {
     let features = SceneFeatures::of(&scene);
     let shadows = features.needs_shadow_rays(settings.transport);
     let batch_size = world.resource::<BatchSize>().0;
-    let batches: Vec<(u64, usize)> = kernels::batch_ranges(settings, batch_size).collect();
-    let pixel_count = settings.width as usize * settings.height as usize;
+    let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     world.insert_resource(WavefrontFrame {
         scene,
         camera: CameraRays::new(&camera, settings.width, settings.height),
@@ -420,7 +564,10 @@ pub fn render_wavefront(world: &mut World) {
         features,
         shadows,
     });
-    world.insert_resource(PixelAccumulator(PixelSums::new(pixel_count)));
+    world.insert_resource(PixelSums(PixelAccumulator::new(
+        settings.width,
+        settings.height,
+    )));
     world.insert_resource(WavefrontStats::default());
 
     let start = Instant::now();
@@ -440,10 +587,7 @@ pub fn render_wavefront(world: &mut World) {
         }
     }
     let render_seconds = start.elapsed().as_secs_f64();
-    let film = world
-        .resource::<PixelAccumulator>()
-        .0
-        .resolve(settings.width, settings.height);
+    let film = world.resource::<PixelSums>().0.resolve();
     let mut report = world.resource::<WavefrontStats>().0;
     report.batches = batches.len();
     let mut frame = world.resource_mut::<Frame>();
@@ -459,4 +603,35 @@ pub fn last_stage_seconds(world: &World) -> StageSeconds {
         .get_resource::<WavefrontStats>()
         .map(|s| s.0.stages)
         .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The system of `stage`: the match makes sure that every stage has
+    /// one.
+    fn system_name(stage: Stage) -> &'static str {
+        use std::any::type_name_of_val as name;
+        match stage {
+            Stage::GenerateCameraRays => name(&generate_camera_rays),
+            Stage::IntersectClosest => name(&intersect_closest),
+            Stage::HandleEscapedRays => name(&handle_escaped_rays),
+            Stage::ShadeEmissive => name(&shade_emissive),
+            Stage::ShadeDiffuse => name(&shade_diffuse),
+            Stage::ShadeMirror => name(&shade_mirror),
+            Stage::ShadeGlass => name(&shade_glass),
+            Stage::ShadeGeneral => name(&shade_general),
+            Stage::TraceShadowRays => name(&trace_shadow_rays),
+            Stage::UpdateFilm => name(&update_film),
+        }
+    }
+
+    #[test]
+    fn stage_systems_are_named_after_their_stages() {
+        for stage in Stage::ALL {
+            let name = system_name(stage);
+            assert_eq!(name.rsplit("::").next(), Some(stage.name()), "{name}");
+        }
+    }
 }

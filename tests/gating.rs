@@ -9,10 +9,10 @@ use bevy_ecs::prelude::*;
 use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::integrators::IntegratorKind;
-use prism::integrators::wavefront::StageRuns;
 use prism::integrators::wavefront::queues::QueueBytes;
+use prism::integrators::wavefront::{Stage, StageRuns};
 use prism::scene::material::MaterialClass;
-use prism::systems::wavefront::{HitQueues, ShadowRays, StageGating, StageScratch};
+use prism::systems::wavefront::{ShadowRays, StageGating, StageScratch, hit_queue};
 use prism::systems::{self, Frame, RenderConfig};
 
 /// Spheres and a disk, all Lambertian, one point light.
@@ -74,11 +74,14 @@ fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
     for transport in [Transport::Whitted, Transport::Path] {
         let world = wavefront_world(DIFFUSE_ONLY, transport, false);
         let r = runs(&world);
-        assert_eq!(r.shade_mirror, 0, "{transport:?}");
-        assert_eq!(r.shade_glass, 0, "{transport:?}");
-        assert_eq!(r.shade_general, 0, "{transport:?}");
-        assert_eq!(r.shade_emissive, 0, "{transport:?}");
-        assert!(r.shade_diffuse > 0 && r.trace_shadow_rays > 0, "{r:?}");
+        assert_eq!(r.get(Stage::ShadeMirror), 0, "{transport:?}");
+        assert_eq!(r.get(Stage::ShadeGlass), 0, "{transport:?}");
+        assert_eq!(r.get(Stage::ShadeGeneral), 0, "{transport:?}");
+        assert_eq!(r.get(Stage::ShadeEmissive), 0, "{transport:?}");
+        assert!(
+            r.get(Stage::ShadeDiffuse) > 0 && r.get(Stage::TraceShadowRays) > 0,
+            "{r:?}"
+        );
         assert_eq!(
             world
                 .resource::<Frame>()
@@ -96,25 +99,27 @@ fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
             ]
         );
         // The hit queues of the absent classes were never allocated.
-        let hits = &world.resource::<HitQueues>().0;
         for class in [
             MaterialClass::Mirror,
             MaterialClass::Glass,
             MaterialClass::General,
             MaterialClass::Emissive,
         ] {
-            assert_eq!(hits.get(class).bytes(), 0, "{class:?}");
+            assert_eq!(hit_queue(&world, class).bytes(), 0, "{class:?}");
         }
-        assert!(hits.get(MaterialClass::Diffuse).bytes() > 0);
+        assert!(hit_queue(&world, MaterialClass::Diffuse).bytes() > 0);
         let scratch = world.resource::<StageScratch>();
         // No refraction queue ever; under Whitted transport no secondary
         // ray queue at all (diffuse surfaces spawn none), so one bounce.
         assert_eq!(scratch.refraction_bytes(), 0, "{transport:?}");
         if transport == Transport::Whitted {
             assert_eq!(scratch.secondary_bytes(), 0);
-            assert_eq!(r.intersect_closest, r.generate_camera_rays);
+            assert_eq!(
+                r.get(Stage::IntersectClosest),
+                r.get(Stage::GenerateCameraRays)
+            );
         } else {
-            assert!(r.intersect_closest > r.generate_camera_rays);
+            assert!(r.get(Stage::IntersectClosest) > r.get(Stage::GenerateCameraRays));
         }
     }
 }
@@ -124,7 +129,7 @@ fn forcing_every_stage_runs_them_all_and_changes_nothing() {
     let gated = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, false);
     let forced = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, true);
     let r = runs(&forced);
-    assert!(r.shade_mirror > 0 && r.shade_glass > 0 && r.shade_emissive > 0 && r.shade_general > 0);
+    assert!(Stage::ALL.iter().all(|&s| r.get(s) > 0), "{r:?}");
     let a = gated.resource::<Frame>().film.as_ref().unwrap();
     let b = forced.resource::<Frame>().film.as_ref().unwrap();
     assert!(a.pixels == b.pixels);
@@ -139,7 +144,7 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
     assert!(!unlit.contains("[[lights]]"));
     for transport in [Transport::Whitted, Transport::Path] {
         let world = wavefront_world(&unlit, transport, false);
-        assert_eq!(runs(&world).trace_shadow_rays, 0, "{transport:?}");
+        assert_eq!(runs(&world).get(Stage::TraceShadowRays), 0, "{transport:?}");
         assert_eq!(world.resource::<ShadowRays>().0.bytes(), 0);
     }
     // An emissive sphere lights the scene only under path transport.
@@ -147,10 +152,12 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
         "{unlit}\n[[objects]]\nshape = {{ type = \"sphere\", radius = 0.3 }}\ntranslate = [0, 3, 0]\nmaterial = {{ color = 0.0, diffuse = 0.0, emission = 20 }}\n"
     );
     assert_eq!(
-        runs(&wavefront_world(&glowing, Transport::Whitted, false)).trace_shadow_rays,
+        runs(&wavefront_world(&glowing, Transport::Whitted, false)).get(Stage::TraceShadowRays),
         0
     );
-    assert!(runs(&wavefront_world(&glowing, Transport::Path, false)).trace_shadow_rays > 0);
+    assert!(
+        runs(&wavefront_world(&glowing, Transport::Path, false)).get(Stage::TraceShadowRays) > 0
+    );
 }
 
 #[test]

@@ -9,8 +9,8 @@ use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{
-    self, BatchSize, Bounce, CurrentRays, EscapedRays, HitQueues, NextRays, ShadowRays, StartBatch,
-    WavefrontFrame,
+    self, BatchSize, Bounce, CurrentRays, EscapedRays, NextRays, ShadowRays, StartBatch,
+    WavefrontFrame, hit_queue, hit_queue_mut,
 };
 use prism::systems::{self, Frame, RenderConfig};
 
@@ -252,12 +252,9 @@ fn stages_drain_their_queues_and_misses_are_escaped() {
     only_intersect.add_systems(wavefront::intersect_closest);
     only_intersect.run(&mut world);
     let escaped = world.resource::<EscapedRays>().0.len();
-    let hits: usize = world
-        .resource::<HitQueues>()
-        .0
-        .queues
+    let hits: usize = MaterialClass::ALL
         .iter()
-        .map(|q| q.len())
+        .map(|&c| hit_queue(&world, c).len())
         .sum();
     assert_eq!(escaped + hits, n, "every ray is routed exactly once");
     assert!(escaped > 0 && hits > 0);
@@ -268,27 +265,20 @@ fn stages_drain_their_queues_and_misses_are_escaped() {
         .filter(|&i| scene.intersect(&rays.ray(i), 0.0, f32::INFINITY).is_none())
         .count();
     assert_eq!(misses, escaped);
-    let diffuse = world
-        .resource::<HitQueues>()
-        .0
-        .get(MaterialClass::Diffuse)
-        .len();
+    let diffuse = hit_queue(&world, MaterialClass::Diffuse).len();
     assert_eq!(diffuse, hits, "both materials are diffuse");
 
     // A whole bounce drains every queue it consumes.
     world.resource_mut::<EscapedRays>().0.clear();
-    for q in &mut world.resource_mut::<HitQueues>().0.queues {
-        q.clear();
+    for class in MaterialClass::ALL {
+        hit_queue_mut(&mut world, class).clear();
     }
     world.run_schedule(Bounce);
     assert!(world.resource::<EscapedRays>().0.is_empty());
     assert!(
-        world
-            .resource::<HitQueues>()
-            .0
-            .queues
+        MaterialClass::ALL
             .iter()
-            .all(|q| q.is_empty())
+            .all(|&c| hit_queue(&world, c).is_empty())
     );
     assert!(world.resource::<ShadowRays>().0.is_empty());
     assert!(world.resource::<NextRays>().0.is_empty());

@@ -11,6 +11,7 @@ use glam::Vec2;
 use crate::core::math::Color;
 use crate::core::rng::Sampler;
 use crate::core::settings::RenderSettings;
+use crate::image::film::PixelSum;
 use crate::integrators::counters::RenderCounters;
 use crate::scene::camera::{Camera, CameraRays};
 
@@ -28,14 +29,11 @@ pub fn film_sample(x: u32, y: u32, spp: u32, sampler: &mut Sampler) -> Vec2 {
     }
 }
 
-/// Adds one sample to a pixel accumulator, dropping (and counting)
-/// non-finite samples so that none reaches the image.
+/// Adds one sample to a pixel's sum, counting it in `counters` when it is
+/// dropped as non-finite (see [`PixelSum::add`]).
 #[inline]
-pub fn accumulate(sum: &mut Color, valid: &mut u32, sample: Color, counters: &mut RenderCounters) {
-    if sample.is_finite() {
-        *sum += sample;
-        *valid += 1;
-    } else {
+pub fn accumulate(pixel: &mut PixelSum, sample: Color, counters: &mut RenderCounters) {
+    if !pixel.add(sample) {
         counters.nonfinite_samples += 1;
     }
 }

@@ -13,9 +13,8 @@
 
 use rayon::prelude::*;
 
-use crate::core::math::Color;
 use crate::core::settings::{MAX_SPP, RenderSettings};
-use crate::image::film::Film;
+use crate::image::film::{Film, PixelAccumulator};
 use crate::integrators::counters::RenderCounters;
 use crate::integrators::recursive::pixel_sample;
 use crate::integrators::{accumulate, camera_rays};
@@ -25,22 +24,15 @@ use crate::scene::camera::Camera;
 /// Running per-pixel sums of a progressively refined image.
 #[derive(Clone, Debug, Default)]
 pub struct Accumulator {
-    width: u32,
-    height: u32,
-    sum: Vec<Color>,
-    valid: Vec<u32>,
+    pixels: PixelAccumulator,
     samples: u32,
 }
 
 impl Accumulator {
     /// An empty accumulator for a `width` x `height` image.
     pub fn new(width: u32, height: u32) -> Self {
-        let n = width as usize * height as usize;
         Self {
-            width,
-            height,
-            sum: vec![Color::ZERO; n],
-            valid: vec![0; n],
+            pixels: PixelAccumulator::new(width, height),
             samples: 0,
         }
     }
@@ -52,8 +44,7 @@ impl Accumulator {
 
     /// Forgets every sample.
     pub fn reset(&mut self) {
-        self.sum.fill(Color::ZERO);
-        self.valid.fill(0);
+        self.pixels.reset();
         self.samples = 0;
     }
 
@@ -69,7 +60,7 @@ impl Accumulator {
     ) -> RenderCounters {
         assert_eq!(
             (settings.width, settings.height),
-            (self.width, self.height),
+            self.pixels.size(),
             "accumulator size"
         );
         let Some(total) = self
@@ -90,13 +81,13 @@ impl Accumulator {
         let cam = camera_rays(camera, settings);
         let width = settings.width as usize;
         let counters = self
-            .sum
+            .pixels
+            .pixels_mut()
             .par_chunks_mut(width)
-            .zip(self.valid.par_chunks_mut(width))
             .enumerate()
-            .map(|(y, (sums, valids))| {
+            .map(|(y, row)| {
                 let mut counters = RenderCounters::default();
-                for (x, (sum, valid)) in sums.iter_mut().zip(valids.iter_mut()).enumerate() {
+                for (x, sum) in row.iter_mut().enumerate() {
                     for s in first..total {
                         let l = pixel_sample(
                             scene,
@@ -106,7 +97,7 @@ impl Accumulator {
                             (s, total),
                             &mut counters,
                         );
-                        accumulate(sum, valid, l, &mut counters);
+                        accumulate(sum, l, &mut counters);
                     }
                 }
                 counters
@@ -121,14 +112,6 @@ impl Accumulator {
 
     /// The current image: each pixel's mean over its finite samples.
     pub fn film(&self) -> Film {
-        let mut film = Film::new(self.width, self.height);
-        for ((px, sum), &valid) in film.pixels.iter_mut().zip(&self.sum).zip(&self.valid) {
-            *px = if valid > 0 {
-                *sum / valid as f32
-            } else {
-                Color::ZERO
-            };
-        }
-        film
+        self.pixels.resolve()
     }
 }

@@ -8,7 +8,7 @@ use super::{Progress, accumulate, camera_rays, film_sample};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Transport};
-use crate::image::film::Film;
+use crate::image::film::{Film, PixelSum};
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
@@ -143,8 +143,7 @@ pub fn render(
         .map(|(y, row)| {
             let mut counters = RenderCounters::default();
             for (x, px) in row.iter_mut().enumerate() {
-                let mut sum = Color::ZERO;
-                let mut valid = 0;
+                let mut sum = PixelSum::default();
                 for s in 0..settings.spp {
                     let l = pixel_sample(
                         scene,
@@ -154,13 +153,9 @@ pub fn render(
                         (s, settings.spp),
                         &mut counters,
                     );
-                    accumulate(&mut sum, &mut valid, l, &mut counters);
+                    accumulate(&mut sum, l, &mut counters);
                 }
-                *px = if valid > 0 {
-                    sum / valid as f32
-                } else {
-                    Color::ZERO
-                };
+                *px = sum.mean();
             }
             if let Some(p) = progress {
                 p(1);

@@ -404,15 +404,12 @@ fn print_table(r: &SceneResult) {
         );
     }
     if let Some(st) = r.integrators.iter().find_map(|i| i.stage_seconds) {
-        println!(
-            "  wavefront stages (s): generate {:.4}, intersect {:.4}, escaped {:.4}, shade {:.4}, shadows {:.4}, film {:.4}",
-            st.generate_camera_rays,
-            st.intersect_closest,
-            st.handle_escaped_rays,
-            st.shade,
-            st.trace_shadow_rays,
-            st.update_film
-        );
+        let stages: Vec<String> = st
+            .by_key()
+            .into_iter()
+            .map(|(key, seconds)| format!("{key} {seconds:.4}"))
+            .collect();
+        println!("  wavefront stages (s): {}", stages.join(", "));
     }
     println!(
         "  speedup of the wavefront over recursive: {:.2}x (medians), {:.2}x (fastest runs)",

@@ -1,0 +1,393 @@
+//! The stage kernels: each drains one queue and fills others.
+//!
+//! Plain functions over the queues of
+//! [`queues`](crate::integrators::wavefront::queues); the ECS systems in
+//! `systems/wavefront.rs` call them. The parallel stages drain their queue
+//! with [`drain`](crate::integrators::wavefront::drain) and leave where
+//! each result goes to [`routing`](crate::integrators::wavefront::routing).
+
+use crate::accel::packet::LANES;
+use crate::core::math::{Color, Ray, max_component};
+use crate::core::rng::Sampler;
+use crate::core::settings::{RenderSettings, Transport};
+use crate::image::film::PixelAccumulator;
+use crate::integrators::counters::{RayCounts, RenderCounters};
+use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
+use crate::integrators::wavefront::queues::{
+    EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
+};
+use crate::integrators::wavefront::routing::{
+    ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
+};
+use crate::integrators::{accumulate, film_sample};
+use crate::scene::camera::CameraRays;
+use crate::scene::material::MaterialClass;
+use crate::scene::{Hit, InstanceGeometry, RenderScene, StreamScratch};
+use crate::transport::interaction::Interaction;
+use crate::transport::path::{self, LobeChoice};
+use crate::transport::whitted::{direct_light, scatter};
+
+/// Stage: one camera ray per path of the batch `[first, first + count)`.
+/// Path `p` is sample `p % spp` of pixel `p / spp`, with the same film
+/// position and sample keys as the recursive tracer.
+pub fn generate_camera_rays(
+    camera: &CameraRays,
+    settings: &RenderSettings,
+    first: u64,
+    count: usize,
+    out: &mut RayQueue,
+    rays: &mut RayCounts,
+) {
+    out.clear();
+    let spp = settings.spp as u64;
+    let width = settings.width as u64;
+    for local in 0..count {
+        let p = first + local as u64;
+        let pixel = p / spp;
+        let sample = (p % spp) as u32;
+        let (x, y) = ((pixel % width) as u32, (pixel / width) as u32);
+        let mut sampler = Sampler::new(settings.seed, pixel as u32, sample);
+        let ray = camera.ray(film_sample(x, y, settings.spp, &mut sampler));
+        out.push(RayItem {
+            ray,
+            throughput: Color::ONE,
+            path: local as u32,
+            depth: 0,
+            pdf: 0.0,
+        });
+    }
+    rays.camera += count as u64;
+}
+
+/// One chunk's buffers for tracing its rays as streams.
+#[derive(Debug, Default)]
+pub struct StreamBuffers {
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    scratch: StreamScratch,
+}
+
+impl StreamBuffers {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.rays.capacity() * std::mem::size_of::<Ray>()
+            + self.hits.capacity() * std::mem::size_of::<Option<Hit>>()
+            + self.scratch.bytes()
+    }
+}
+
+/// One chunk's buffers of [`intersect_closest`]: its routed rays and its
+/// stream buffers.
+#[derive(Debug, Default)]
+pub struct IntersectChunk {
+    routed: RoutedChunk,
+    streams: StreamBuffers,
+}
+
+impl IntersectChunk {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.routed.bytes() + self.streams.bytes()
+    }
+}
+
+/// Per-chunk buffers of [`intersect_closest`], kept between calls.
+pub type RoutingScratch = Vec<IntersectChunk>;
+
+/// Stage: closest hit for every ray of `rays`, routed to `escaped` or to
+/// the hit queue of the material's class. Chunks are traced and routed in
+/// parallel into `scratch`, then appended in chunk order.
+pub fn intersect_closest(
+    scene: &RenderScene,
+    classes: &[MaterialClass],
+    rays: &RayQueue,
+    scratch: &mut RoutingScratch,
+    escaped: &mut EscapedQueue,
+    hits: &mut impl ClassHitQueues,
+) {
+    // Streams pay only where there is a mesh to traverse.
+    let use_streams = scene
+        .instances
+        .iter()
+        .any(|i| matches!(i.geometry, InstanceGeometry::Mesh(_)));
+    let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
+        let IntersectChunk { routed, streams } = chunk;
+        routed.clear();
+        if use_streams {
+            // The top level in packets of eight, then every mesh with
+            // one stream per direction octant for the whole chunk
+            // (see `crate::accel::stream`): measured faster than packets of
+            // eight for camera rays as well as for secondary rays,
+            // which share a mesh's upper nodes even where packets of
+            // eight share nothing.
+            let StreamBuffers {
+                rays: r,
+                hits,
+                scratch,
+            } = streams;
+            r.clear();
+            r.extend(range.clone().map(|i| rays.ray(i)));
+            hits.clear();
+            hits.resize(r.len(), None);
+            scene.intersect_stream(r, hits, scratch);
+            for (k, h) in hits.iter().enumerate() {
+                routed.route(classes, rays, range.start + k, *h);
+            }
+            return;
+        }
+        let mut found = [None; LANES];
+        for i in range.clone() {
+            let lane = (i - range.start) % LANES;
+            if lane == 0 {
+                // No mesh: eight neighbouring rays go through the top
+                // level as one packet.
+                let n = (range.end - i).min(LANES);
+                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
+                scene.intersect_packet_with(&packet[..n], &mut found, true);
+            }
+            routed.route(classes, rays, i, found[lane]);
+        }
+    });
+    join_routed(chunks.iter().map(|c| &c.routed), escaped, hits);
+}
+
+/// Stage: escaped rays bring back the background.
+pub fn handle_escaped_rays(escaped: &EscapedQueue, background: Color, radiance: &mut [Color]) {
+    for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
+        radiance[path as usize] += t * background;
+    }
+}
+
+/// Per-chunk buffers of the shading stages.
+pub type ShadeScratch = Vec<ShadeOutput>;
+
+/// Runs `kernel` on every hit of `hits` with its interaction, in parallel
+/// chunks each writing its own [`ShadeOutput`], then joins the outputs in
+/// chunk order.
+fn shade_hits(
+    scene: &RenderScene,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    to: ShadeTargets<'_>,
+    kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
+) {
+    let outputs = drain_queue(hits.len(), scratch, |range, out| {
+        out.clear();
+        for i in range {
+            let h = hits.get(i);
+            let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+            kernel(&h, &it, out);
+        }
+    });
+    join_shade_outputs(outputs, to);
+}
+
+/// Stage, Whitted transport: shades every hit of one material class.
+/// Emission goes straight to the path's radiance; lit classes push one
+/// shadow ray per light that can contribute; scattering classes push
+/// reflection and refraction rays above the contribution threshold, up to
+/// the maximum depth.
+///
+/// `LIT` and `SCATTER` select the lobes the class has, so each class's
+/// kernel runs only the code it needs. Within a chunk, reflection rays go
+/// before refraction rays, so that neighbouring rays of the next bounce
+/// are alike.
+pub fn shade<const LIT: bool, const SCATTER: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    to: ShadeTargets<'_>,
+) {
+    shade_hits(scene, hits, scratch, to, |h, it, out| {
+        if it.surface.emission != Color::ZERO {
+            out.emit(h.path, h.throughput * it.surface.emission);
+        }
+        if LIT && it.is_lit_by_lights() {
+            for light in &scene.lights {
+                if let Some(q) = direct_light(it, light) {
+                    out.push_shadow(h, q);
+                }
+            }
+        }
+        if SCATTER && h.depth < settings.max_depth {
+            for s in scatter(it).into_iter().flatten() {
+                let t = h.throughput * s.weight;
+                if max_component(t) < settings.min_contribution {
+                    continue;
+                }
+                let item = RayItem {
+                    ray: s.ray,
+                    throughput: t,
+                    path: h.path,
+                    depth: h.depth + 1,
+                    pdf: 0.0,
+                };
+                out.push_secondary(s.kind, item);
+            }
+        }
+    });
+}
+
+/// Stage, path transport: shades every hit of one material class. Each
+/// hit adds its MIS-weighted emission, pushes next-event shadow rays
+/// (`NEE`: the class has a lobe lights can reach) and at most one
+/// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
+/// from the same sample numbers. `first` is the batch's first path.
+pub fn shade_path<const NEE: bool, const SCATTER: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    first: u64,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    to: ShadeTargets<'_>,
+) {
+    let spp = settings.spp as u64;
+    shade_hits(scene, hits, scratch, to, |h, it, out| {
+        let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
+        if e != Color::ZERO {
+            out.emit(h.path, h.throughput * e);
+        }
+        if !NEE && !SCATTER {
+            return;
+        }
+        let p = first + h.path as u64;
+        let mut sampler = Sampler::new(settings.seed, (p / spp) as u32, (p % spp) as u32);
+        let lobes = LobeChoice::new(it);
+        if NEE {
+            path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
+                out.push_shadow(h, q)
+            });
+        }
+        if SCATTER
+            && let Some(cont) =
+                path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
+        {
+            let item = RayItem {
+                ray: cont.sample.ray,
+                throughput: h.throughput * cont.sample.weight * cont.scale,
+                path: h.path,
+                depth: h.depth + 1,
+                pdf: cont.sample.pdf,
+            };
+            out.push_secondary(cont.sample.kind, item);
+        }
+    });
+}
+
+/// Stage: shades the hits of `class` with the kernel for the lobes the
+/// class has ([`MaterialClass::is_lit`], [`MaterialClass::scatters`]) and
+/// the settings' transport; `first` is the batch's first path.
+pub fn shade_class(
+    class: MaterialClass,
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    first: u64,
+    hits: &HitQueue,
+    scratch: &mut ShadeScratch,
+    to: ShadeTargets<'_>,
+) {
+    let lobes = (class.is_lit(), class.scatters());
+    if settings.transport == Transport::Path {
+        let f = match lobes {
+            (false, false) => shade_path::<false, false>,
+            (false, true) => shade_path::<false, true>,
+            // Every lit class also scatters diffusely under path transport.
+            (true, _) => shade_path::<true, true>,
+        };
+        return f(scene, settings, first, hits, scratch, to);
+    }
+    let f = match lobes {
+        (false, false) => shade::<false, false>,
+        (false, true) => shade::<false, true>,
+        (true, false) => shade::<true, false>,
+        (true, true) => shade::<true, true>,
+    };
+    f(scene, settings, hits, scratch, to)
+}
+
+/// Reusable buffers of [`trace_shadow_rays`].
+#[derive(Clone, Debug, Default)]
+pub struct ShadowScratch {
+    /// Each work chunk's segment and ray range, in queue order.
+    work: Vec<(usize, std::ops::Range<usize>)>,
+    /// Each work chunk's visibility flags.
+    visible: Vec<Vec<bool>>,
+}
+
+impl ShadowScratch {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.work.capacity() * std::mem::size_of::<(usize, std::ops::Range<usize>)>()
+            + self.visible.iter().map(|v| v.capacity()).sum::<usize>()
+    }
+}
+
+/// Stage: traces every shadow ray, stopping at the first blocker, and adds
+/// the radiance of the unblocked ones to their paths, in queue order.
+///
+/// Eight consecutive shadow rays (mostly one hit point's rays to eight
+/// lights) go through the top level as a packet, and each lane traverses
+/// meshes alone: whole packets, also with rays binned by light, were
+/// measured slower than single rays, because the single-ray node test is
+/// SIMD across a node's eight children already.
+pub fn trace_shadow_rays(
+    scene: &RenderScene,
+    shadows: &ShadowSegments,
+    scratch: &mut ShadowScratch,
+    radiance: &mut [Color],
+) {
+    let ShadowScratch { work, visible } = scratch;
+    // Work chunks of at most CHUNK rays, each within one segment.
+    work.clear();
+    for (s, seg) in shadows.segments().iter().enumerate() {
+        work.extend(chunk_ranges(seg.len()).map(|range| (s, range)));
+    }
+    let work = &*work;
+    let flags = drain_chunks(work.len(), visible, |c, flags| {
+        let (s, range) = &work[c];
+        let seg = &shadows.segments()[*s];
+        flags.clear();
+        flags.resize(range.len(), false);
+        for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
+            let j = range.start + k * LANES;
+            let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(lanes.len() - 1)));
+            let blocked = scene.occluded_packet_with(
+                &rays[..lanes.len()],
+                &seg.t_max[j..j + lanes.len()],
+                false,
+            );
+            for (l, v) in lanes.iter_mut().enumerate() {
+                *v = blocked & (1 << l) == 0;
+            }
+        }
+    });
+    for ((s, range), flags) in work.iter().zip(flags.iter()) {
+        let seg = &shadows.segments()[*s];
+        let rays = seg.path[range.clone()]
+            .iter()
+            .zip(&seg.radiance[range.clone()]);
+        for ((&path, l), &visible) in rays.zip(flags) {
+            if visible {
+                radiance[path as usize] += *l;
+            }
+        }
+    }
+}
+
+/// Stage: adds each finished path of the batch to its pixel, in path
+/// order (so samples are summed in the same order as the recursive
+/// tracer sums them), dropping and counting non-finite samples.
+pub fn update_film(
+    radiance: &[Color],
+    first: u64,
+    spp: u32,
+    sums: &mut PixelAccumulator,
+    counters: &mut RenderCounters,
+) {
+    let pixels = sums.pixels_mut();
+    for (local, &l) in radiance.iter().enumerate() {
+        let pixel = ((first + local as u64) / spp as u64) as usize;
+        accumulate(&mut pixels[pixel], l, counters);
+    }
+}
