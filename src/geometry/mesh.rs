@@ -401,3 +401,100 @@ static MESH_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::Atomic
 pub fn mesh_bvh_builds() -> u64 {
     MESH_BVH_BUILDS.load(std::sync::atomic::Ordering::Relaxed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::build::cwbvh_depth;
+
+    /// Small triangles at geometrically growing distances along a line:
+    /// each triangle's nearest neighbour is the next smaller one, so the
+    /// builder can only chain them (one level per merge) and the 8-wide
+    /// tree is about a seventh as deep as the triangles are many.
+    fn deep_soup(n: u32) -> MeshData {
+        let mut data = MeshData::default();
+        for i in 0..n {
+            let x = 1.1f32.powi(i as i32) * 1e-3;
+            let s = 0.02 * x;
+            let k = data.positions.len() as u32;
+            data.positions.push(Vec3::new(x - s, -s, 0.0));
+            data.positions.push(Vec3::new(x + s, -s, 0.0));
+            data.positions.push(Vec3::new(x, s, 0.0));
+            data.indices.push([k, k + 1, k + 2]);
+        }
+        data
+    }
+
+    /// Trees deeper than 32 levels, which only degenerate input produces:
+    /// packet traversal used to panic on its fixed stack there, and
+    /// obvhs's single-ray stack silently overwrote its last entry (losing
+    /// subtrees). Every traversal must find what brute force finds.
+    #[test]
+    fn deep_trees_are_traversed_completely() {
+        let mesh = Mesh::new(
+            "soup",
+            deep_soup(320),
+            NormalMode::Flat,
+            BuildQuality::Medium,
+        )
+        .unwrap();
+        let depth = cwbvh_depth(&mesh.bvh);
+        assert!(
+            depth > 32,
+            "the soup must be deeper than 32 levels, got {depth}"
+        );
+        let mut rays = Vec::new();
+        let mut s = 7u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for i in 0..640 {
+            // Straight down onto triangle i / 2, near its centre, or beside it.
+            let x = 1.1f32.powi((i / 2) as i32) * 1e-3;
+            let dx = (next() - 0.5) * 0.05 * x;
+            let dy = (next() - 0.5) * 0.05 * x;
+            let o = Vec3A::new(x + dx, dy, x);
+            rays.push(Ray::new(o, Vec3A::new(0.0, 0.0, -1.0)));
+        }
+        let mut hits = 0;
+        let mut stream = Stream::default();
+        for r in &rays {
+            stream.push(*r, 0.0, f32::INFINITY);
+        }
+        let (mut wt, mut best) = (Vec::new(), Vec::new());
+        mesh.intersect_stream(&mut stream, &mut wt, &mut best);
+        for (k, chunk) in rays.chunks(LANES).enumerate() {
+            let mut packet = Packet::new(
+                chunk,
+                &vec![0.0; chunk.len()],
+                &vec![f32::INFINITY; chunk.len()],
+            );
+            let mut packed = [None; LANES];
+            let lanes = packet.valid;
+            mesh.intersect_packet(&mut packet, lanes, &mut packed);
+            for (l, r) in chunk.iter().enumerate() {
+                let want = mesh.intersect_brute_force(r, 0.0, f32::INFINITY);
+                hits += want.is_some() as u32;
+                let t = |h: Option<MeshHit>| h.map(|h| h.t);
+                assert_eq!(
+                    t(mesh.intersect(r, 0.0, f32::INFINITY)),
+                    t(want),
+                    "single ray {}",
+                    k * LANES + l
+                );
+                assert_eq!(t(packed[l]), t(want), "packet ray {}", k * LANES + l);
+                assert_eq!(
+                    t(best[k * LANES + l]),
+                    t(want),
+                    "stream ray {}",
+                    k * LANES + l
+                );
+                assert_eq!(mesh.occluded(r, 0.0, f32::INFINITY), want.is_some());
+            }
+        }
+        assert!(hits > 200, "only {hits} of the rays hit the soup");
+    }
+}
