@@ -425,16 +425,9 @@ pub(crate) fn progress_bar(total: u64, quiet: bool, template: &str) -> Option<Pr
 }
 
 fn write_stats(path: &Path, stats: &RenderStats) -> Result<()> {
-    let err = |message: String| Error::Output {
+    let json = serde_json::to_string_pretty(stats).map_err(|e| Error::Output {
         path: path.to_path_buf(),
-        message,
-    };
-    let json = serde_json::to_string_pretty(stats).map_err(|e| err(e.to_string()))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| err(e.to_string()))?;
-    std::io::Write::write_all(&mut tmp, json.as_bytes()).map_err(|e| err(e.to_string()))?;
-    prism::image::output::persist_readable(tmp, path).map_err(err)
+        message: e.to_string(),
+    })?;
+    prism::image::output::write_atomic(path, json.as_bytes())
 }

@@ -7,7 +7,7 @@
 //! (`tradeoff.png`, `tradeoff.svg`) with the Pareto front marked.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -19,7 +19,7 @@ use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::image::metrics::{self, Metrics};
-use prism::image::output::PngOptions;
+use prism::image::output::{PngOptions, write_atomic};
 use prism::integrators::IntegratorKind;
 use prism::io::desc::{SceneDesc, SettingsDesc};
 use prism::systems::{self, RenderConfig};
@@ -320,26 +320,6 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
         );
     }
     s
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same folder.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let err = |message: String| Error::Output {
-        path: path.to_path_buf(),
-        message,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".prism-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| err(format!("cannot create a file in {}: {e}", dir.display())))?;
-    std::io::Write::write_all(&mut tmp, bytes).map_err(|e| err(e.to_string()))?;
-    tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
-    prism::image::output::persist_readable(tmp, path).map_err(err)
 }
 
 /// Renders `config` `runs` times; returns the image, the median seconds
