@@ -16,11 +16,12 @@ use prism::core::rng::Sampler;
 use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::integrators::IntegratorKind;
-use prism::integrators::counters::RayCountsJson;
 use prism::integrators::wavefront::StageSeconds;
 use prism::scene::camera::CameraRays;
 use prism::scene::{RenderScene, StreamScratch};
 use prism::systems::{self, Frame, RenderConfig};
+
+use crate::stats::RayCountsJson;
 
 /// Options of `prism bench`.
 #[derive(clap::Args, Debug)]

@@ -13,7 +13,6 @@ use prism::core::settings::Transport;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::{OutputFormat, PngOptions, ToneMap};
 use prism::integrators::IntegratorKind;
-use prism::integrators::counters::RenderStats;
 use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::{self, Frame, RenderConfig};
 
@@ -27,7 +26,10 @@ struct Cli {
 
 mod bench;
 mod compare;
+mod stats;
 mod tradeoff;
+
+use stats::{RenderStats, WavefrontStatsJson};
 
 #[derive(Subcommand, Debug)]
 enum Command {
@@ -373,16 +375,14 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         primitives,
         lights: light_count,
         nonfinite_samples: frame.counters.nonfinite_samples,
-        wavefront: frame
-            .wavefront
-            .map(|w| prism::integrators::counters::WavefrontStatsJson {
-                stage_seconds: w.stages,
-                peak_queue_bytes: w.peak_queue_bytes,
-                batches: w.batches,
-                batch_paths: world.resource::<systems::wavefront::BatchSize>().0,
-                stages_run: w.runs.names_run(),
-                stage_runs: w.runs,
-            }),
+        wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
+            stage_seconds: w.stages,
+            peak_queue_bytes: w.peak_queue_bytes,
+            batches: w.batches,
+            batch_paths: world.resource::<systems::wavefront::BatchSize>().0,
+            stages_run: w.runs.names_run(),
+            stage_runs: w.runs,
+        }),
     };
     if let Some(path) = &args.stats {
         write_stats(path, &stats)?;
