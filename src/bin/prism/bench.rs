@@ -156,7 +156,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.batch_paths == 0 {
         return Err(Error::Invalid("--batch-paths must be at least 1".into()));
     }
-    let (pool, threads) = crate::thread_pool(args.threads)?;
+    let (pool, threads) = crate::args::thread_pool(args.threads)?;
     let mut results = Vec::new();
     for scene in &args.scenes {
         let r = pool.install(|| bench_scene(scene, &args, threads))?;

@@ -25,8 +25,8 @@ pub struct CompareArgs {
     )]
     pub exposure: f32,
     /// Tone map applied to both images before FLIP.
-    #[arg(long, value_enum, default_value_t = crate::ToneMapArg::Clamp)]
-    pub tonemap: crate::ToneMapArg,
+    #[arg(long, value_enum, default_value_t = crate::args::ToneMapArg::Clamp)]
+    pub tonemap: crate::args::ToneMapArg,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -44,15 +44,15 @@ struct Report<'a> {
 }
 
 /// The display mapping FLIP sees.
-pub fn display(exposure: f32, tonemap: crate::ToneMapArg) -> Result<PngOptions> {
+pub fn display(exposure: f32, tonemap: crate::args::ToneMapArg) -> Result<PngOptions> {
     if !exposure.is_finite() {
         return Err(Error::Invalid("--exposure must be finite".into()));
     }
     Ok(PngOptions {
         exposure,
         tone_map: match tonemap {
-            crate::ToneMapArg::Clamp => ToneMap::Clamp,
-            crate::ToneMapArg::Reinhard => ToneMap::Reinhard,
+            crate::args::ToneMapArg::Clamp => ToneMap::Clamp,
+            crate::args::ToneMapArg::Reinhard => ToneMap::Reinhard,
         },
     })
 }

@@ -78,8 +78,8 @@ pub struct TradeoffArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Integrator for every render.
-    #[arg(long, value_enum, default_value_t = crate::IntegratorArg::Recursive)]
-    pub integrator: crate::IntegratorArg,
+    #[arg(long, value_enum, default_value_t = crate::args::IntegratorArg::Recursive)]
+    pub integrator: crate::args::IntegratorArg,
     /// Renders per configuration; the median time is reported (the image
     /// is the same every time).
     #[arg(long, default_value_t = 1)]
@@ -372,7 +372,7 @@ pub fn run(args: TradeoffArgs) -> Result<()> {
     if args.reference_spp == 0 {
         return Err(Error::Invalid("--reference-spp must be at least 1".into()));
     }
-    let (pool, _threads) = crate::thread_pool(args.threads)?;
+    let (pool, _threads) = crate::args::thread_pool(args.threads)?;
     pool.install(|| run_in_pool(&args, wall))
 }
 
@@ -482,7 +482,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     if given_reference.is_none() {
         total += reference_config.settings.height as u64 * reference_config.settings.spp as u64;
     }
-    let bar = crate::progress_bar(
+    let bar = crate::render::progress_bar(
         total,
         args.quiet,
         "{spinner} tradeoff [{bar:30}] {percent}% {elapsed_precise} (eta {eta}) {msg}",
