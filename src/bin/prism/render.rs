@@ -8,12 +8,15 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use prism::core::error::{Error, Result};
 use prism::geometry::mesh::BuildQuality;
-use prism::image::output::{OutputFormat, PngOptions, ToneMap};
-use prism::integrators::IntegratorKind;
+use prism::image::output::OutputFormat;
 use prism::io::desc::{Geometry, SettingsDesc};
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::wavefront::BatchSize;
+use prism::systems::{self, Frame, RenderConfig, SceneAccel};
 
-use crate::args::{IntegratorArg, QualityArg, ToneMapArg, TransportArg, thread_pool};
+use crate::args::{
+    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
+    SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
+};
 use crate::stats::{RenderStats, WavefrontStatsJson};
 
 /// Options of `prism render`.
@@ -25,30 +28,14 @@ pub struct RenderArgs {
     /// `.exr` is linear float radiance exactly as computed.
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
-    /// Image width in pixels [default: the scene's, else 640].
-    #[arg(long)]
-    width: Option<u32>,
-    /// Image height in pixels [default: the scene's, else 480].
-    #[arg(long)]
-    height: Option<u32>,
-    /// Samples per pixel; 1 traces the pixel centre, more are jittered
-    /// over the pixel [default: the scene's, else 1].
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Maximum number of reflection/refraction bounces after the camera
-    /// ray [default: the scene's, else 8].
-    #[arg(long)]
-    max_depth: Option<u32>,
-    /// Do not trace secondary rays whose contribution to the pixel (largest
-    /// channel of the path weight) is below this [default: the scene's, else 0.001].
-    #[arg(long)]
-    min_contribution: Option<f32>,
-    /// Worker threads [default: one per core]. The image does not depend on it.
-    #[arg(long)]
-    threads: Option<usize>,
-    /// Seed for pixel jitter [default: the scene's, else 0].
-    #[arg(long)]
-    seed: Option<u64>,
+    #[command(flatten)]
+    frame: FrameFlags,
+    #[command(flatten)]
+    min_contribution: MinContributionFlag,
+    #[command(flatten)]
+    threads: ThreadsFlag,
+    #[command(flatten)]
+    seed: SeedFlag,
     /// Which camera to render from, counting from 0 in file order (the
     /// scene file's own camera first, then those of included glTF files).
     #[arg(long, default_value_t = 0)]
@@ -60,30 +47,21 @@ pub struct RenderArgs {
     /// Tone map for PNG output.
     #[arg(long, value_enum, default_value_t = ToneMapArg::Clamp)]
     tonemap: ToneMapArg,
-    /// Integrator.
-    #[arg(long, value_enum, default_value_t = IntegratorArg::Recursive)]
-    integrator: IntegratorArg,
-    /// Light transport [default: the scene's, else whitted].
-    #[arg(long, value_enum)]
-    transport: Option<TransportArg>,
-    /// Path tracing: shadow rays per area light at each hit
-    /// [default: the scene's, else 1].
-    #[arg(long)]
-    light_samples: Option<u32>,
-    /// Path tracing: bounce from which Russian roulette may end paths
-    /// [default: the scene's, else 3].
-    #[arg(long, value_name = "DEPTH", conflicts_with = "no_russian_roulette")]
-    rr_depth: Option<u32>,
+    #[command(flatten)]
+    integrator: IntegratorFlag,
+    #[command(flatten)]
+    transport: TransportFlag,
+    #[command(flatten)]
+    path: PathFlags,
     /// Path tracing: never end paths by Russian roulette (unbiased either
     /// way; roulette trades variance for speed).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "rr_depth")]
     no_russian_roulette: bool,
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
-    /// Paths (pixel samples) per wavefront batch: bounds queue memory.
-    #[arg(long, default_value_t = prism::integrators::wavefront::DEFAULT_BATCH_PATHS)]
-    batch_paths: usize,
+    #[command(flatten)]
+    batch_paths: BatchPathsFlag,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -105,7 +83,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             s.display()
         )));
     }
-    let (pool, threads) = thread_pool(args.threads)?;
+    let (pool, threads) = args.threads.pool()?;
     pool.install(|| render_with_pool(&args, threads, wall))
 }
 
@@ -126,20 +104,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
 
     let s = &desc.settings;
     let settings = SettingsDesc {
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        max_depth: args.max_depth,
-        min_contribution: args.min_contribution,
-        seed: args.seed,
-        exposure: None,
-        transport: args.transport.map(Into::into),
-        light_samples: args.light_samples,
+        min_contribution: args.min_contribution.min_contribution,
+        seed: args.seed.seed,
+        transport: args.transport.get(),
+        light_samples: args.path.light_samples,
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
-            args.rr_depth.map(Some)
+            args.path.rr_depth.map(Some)
         },
+        ..args.frame.desc()
     }
     .resolve(s);
     settings.validate().map_err(|e| {
@@ -148,16 +122,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             args.scene.display()
         ))
     })?;
-    let png = PngOptions {
-        exposure: args.exposure.or(s.exposure).unwrap_or(0.0),
-        tone_map: match args.tonemap {
-            ToneMapArg::Clamp => ToneMap::Clamp,
-            ToneMapArg::Reinhard => ToneMap::Reinhard,
-        },
-    };
-    if !png.exposure.is_finite() {
-        return Err(Error::Invalid("--exposure must be finite".into()));
-    }
+    let png = png_options(args.exposure.or(s.exposure).unwrap_or(0.0), args.tonemap)?;
     let camera_count = desc.cameras.len();
     if camera_count == 0 {
         return Err(Error::load(
@@ -186,13 +151,11 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
     });
-    if args.batch_paths == 0 {
-        return Err(Error::Invalid("--batch-paths must be at least 1".into()));
-    }
-    world.insert_resource(systems::wavefront::BatchSize(args.batch_paths));
+    let batch_paths = args.batch_paths.get()?;
+    world.insert_resource(BatchSize(batch_paths));
     world.insert_resource(RenderConfig {
         settings: settings.clone(),
-        integrator: args.integrator.into(),
+        integrator: args.integrator.kind(),
         camera: Some(cameras[args.camera]),
         bvh_quality: quality,
         background,
@@ -203,7 +166,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         b.finish_and_clear();
     }
 
-    let accel = world.resource::<systems::SceneAccel>();
+    let accel = world.resource::<SceneAccel>();
     let tlas_seconds = accel.build_seconds;
     let (triangles, primitives) = accel
         .scene
@@ -227,7 +190,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let render_seconds = frame.render_seconds;
     let stats = RenderStats {
         scene: args.scene.display().to_string(),
-        integrator: IntegratorKind::from(args.integrator).name().into(),
+        integrator: args.integrator.kind().name().into(),
         transport: settings.transport.name().into(),
         features,
         wall_seconds: wall.elapsed().as_secs_f64(),
@@ -249,7 +212,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,
             batches: w.batches,
-            batch_paths: world.resource::<systems::wavefront::BatchSize>().0,
+            batch_paths,
             stages_run: w.runs.names_run(),
             stage_runs: w.runs,
         }),
