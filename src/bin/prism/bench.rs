@@ -23,7 +23,7 @@ use prism::io::desc::SettingsDesc;
 use prism::scene::camera::{Camera, CameraRays};
 use prism::scene::{RenderScene, StreamScratch};
 use prism::systems::wavefront::BatchSize;
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::{Frame, RenderConfig, Renderer};
 
 use crate::args::{BatchPathsFlag, FrameFlags, ThreadsFlag, TransportArg, TransportFlag};
 use crate::stats::RayCountsJson;
@@ -191,39 +191,34 @@ fn bench_scene(
     if desc.cameras.is_empty() {
         return Err(Error::load(path, "the scene has no camera"));
     }
-    let background = desc.background;
-    let mut world = bevy_ecs::world::World::new();
-    let mut schedule = systems::setup(&mut world);
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(BatchSize(batch_paths));
-    world.insert_resource(RenderConfig {
-        settings: settings.clone(),
-        camera: Some(cameras[0]),
-        background,
-        ..Default::default()
-    });
+    let mut renderer = Renderer::with_scene(
+        desc,
+        RenderConfig {
+            settings: settings.clone(),
+            ..Default::default()
+        },
+        0,
+    )?;
+    renderer.insert_resource(BatchSize(batch_paths));
 
     let mut times = [Vec::new(), Vec::new()];
     let mut frames: [Vec<Frame>; 2] = [Vec::new(), Vec::new()];
     for _ in 0..args.runs {
         for (k, kind) in IntegratorKind::ALL.into_iter().enumerate() {
-            world.resource_mut::<RenderConfig>().integrator = kind;
-            schedule.run(&mut world);
-            let frame = std::mem::take(&mut *world.resource_mut::<Frame>());
-            if let Some(e) = &frame.error {
-                return Err(Error::Invalid(format!("{}: {e}", path.display())));
-            }
+            renderer.config_mut().integrator = kind;
+            let frame = renderer
+                .render()
+                .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
             times[k].push(frame.render_seconds);
             frames[k].push(frame);
         }
     }
-    let scene = world
-        .resource::<systems::SceneAccel>()
-        .scene
-        .clone()
+    let scene = renderer
+        .scene()
         .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
-    let camera = world
-        .get::<Camera>(cameras[0])
+    let camera = renderer
+        .world()
+        .get::<Camera>(renderer.cameras()[0])
         .cloned()
         .ok_or_else(|| Error::Invalid("camera entity vanished".into()))?;
 

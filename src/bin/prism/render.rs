@@ -11,7 +11,7 @@ use prism::geometry::mesh::BuildQuality;
 use prism::image::output::OutputFormat;
 use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::wavefront::BatchSize;
-use prism::systems::{self, Frame, RenderConfig, SceneAccel};
+use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
 use crate::args::{
     BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
@@ -123,6 +123,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         ))
     })?;
     let png = png_options(args.exposure.or(s.exposure).unwrap_or(0.0), args.tonemap)?;
+    // The CLI's own words for camera problems, before Renderer::with_scene
+    // would give its more general ones.
     let camera_count = desc.cameras.len();
     if camera_count == 0 {
         return Err(Error::load(
@@ -136,12 +138,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             args.camera
         )));
     }
-    let background = desc.background;
     let light_count = desc.lights.len();
 
-    let mut world = bevy_ecs::world::World::new();
-    let mut schedule = systems::setup(&mut world);
-    let cameras = systems::spawn_scene(&mut world, desc);
     let bar = progress_bar(
         settings.height as u64,
         args.quiet,
@@ -151,22 +149,25 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
     });
+    let mut renderer = Renderer::with_scene(
+        desc,
+        RenderConfig {
+            settings: settings.clone(),
+            integrator: args.integrator.kind(),
+            bvh_quality: quality,
+            progress,
+            ..Default::default()
+        },
+        args.camera,
+    )?;
     let batch_paths = args.batch_paths.get()?;
-    world.insert_resource(BatchSize(batch_paths));
-    world.insert_resource(RenderConfig {
-        settings: settings.clone(),
-        integrator: args.integrator.kind(),
-        camera: Some(cameras[args.camera]),
-        bvh_quality: quality,
-        background,
-        progress,
-    });
-    schedule.run(&mut world);
+    renderer.insert_resource(BatchSize(batch_paths));
+    renderer.run();
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
 
-    let accel = world.resource::<SceneAccel>();
+    let accel = renderer.world().resource::<SceneAccel>();
     let tlas_seconds = accel.build_seconds;
     let (triangles, primitives) = accel
         .scene
@@ -177,7 +178,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         .as_ref()
         .map(|s| prism::scene::features::SceneFeatures::of(s))
         .unwrap_or_default();
-    let frame = world.resource::<Frame>();
+    let frame = renderer.world().resource::<Frame>();
     if let Some(e) = &frame.error {
         return Err(Error::Invalid(format!("{}: {e}", args.scene.display())));
     }
