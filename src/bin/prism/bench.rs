@@ -56,12 +56,16 @@ pub struct BenchArgs {
     /// Renders per integrator and scene (alternating); the median and the fastest are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+    /// `--threads`.
     #[command(flatten)]
     pub threads: ThreadsFlag,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
     #[command(flatten)]
     pub frame: FrameFlags,
+    /// `--transport`.
     #[command(flatten)]
     pub transport: TransportFlag,
+    /// `--batch-paths`.
     #[command(flatten)]
     pub batch_paths: BatchPathsFlag,
     /// Print JSON instead of a table.

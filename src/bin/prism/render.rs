@@ -28,12 +28,16 @@ pub struct RenderArgs {
     /// `.exr` is linear float radiance exactly as computed.
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
     #[command(flatten)]
     frame: FrameFlags,
+    /// `--min-contribution`.
     #[command(flatten)]
     min_contribution: MinContributionFlag,
+    /// `--threads`.
     #[command(flatten)]
     threads: ThreadsFlag,
+    /// `--seed`.
     #[command(flatten)]
     seed: SeedFlag,
     /// Which camera to render from, counting from 0 in file order (the
@@ -47,10 +51,13 @@ pub struct RenderArgs {
     /// Tone map for PNG output.
     #[arg(long, value_enum, default_value_t = ToneMapArg::Clamp)]
     tonemap: ToneMapArg,
+    /// `--integrator`.
     #[command(flatten)]
     integrator: IntegratorFlag,
+    /// `--transport`.
     #[command(flatten)]
     transport: TransportFlag,
+    /// `--light-samples`, `--rr-depth`.
     #[command(flatten)]
     path: PathFlags,
     /// Path tracing: never end paths by Russian roulette (unbiased either
@@ -60,6 +67,7 @@ pub struct RenderArgs {
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
+    /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
     /// Write timings, ray counts and scene sizes as JSON to FILE.

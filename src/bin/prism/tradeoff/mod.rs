@@ -78,20 +78,26 @@ pub struct TradeoffArgs {
     /// Knobs to sweep, comma-separated [default: all].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub knobs: Vec<Knob>,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
     #[command(flatten)]
     pub frame: FrameFlags,
+    /// `--min-contribution`.
     #[command(flatten)]
     pub min_contribution: MinContributionFlag,
+    /// `--light-samples`, `--rr-depth`.
     #[command(flatten)]
     pub path: PathFlags,
+    /// `--seed`.
     #[command(flatten)]
     pub seed: SeedFlag,
+    /// `--integrator`.
     #[command(flatten)]
     pub integrator: IntegratorFlag,
     /// Renders per configuration; the median time is reported (the image
     /// is the same every time).
     #[arg(long, default_value_t = 1)]
     pub runs: usize,
+    /// `--threads`.
     #[command(flatten)]
     pub threads: ThreadsFlag,
     /// TrueType font for the plot's text [default: DejaVu Sans from the
