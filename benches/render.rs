@@ -10,27 +10,22 @@
 
 use std::path::Path;
 
-use bevy_ecs::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::integrators::IntegratorKind;
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::{RenderConfig, Renderer};
 
 const W: u32 = 320;
 const H: u32 = 240;
 
-fn prepare(name: &str) -> (World, Schedule) {
+fn prepare(name: &str) -> Renderer {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("assets")
         .join(name);
     let desc = prism::io::load(&path, BuildQuality::Medium).expect("load scene");
-    let mut world = World::new();
-    let schedule = systems::setup(&mut world);
     let max_depth = desc.settings.max_depth.unwrap_or(8);
-    let background = desc.background;
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(RenderConfig {
+    let config = RenderConfig {
         settings: RenderSettings {
             width: W,
             height: H,
@@ -38,11 +33,9 @@ fn prepare(name: &str) -> (World, Schedule) {
             max_depth,
             ..Default::default()
         },
-        camera: cameras.first().copied(),
-        background,
         ..Default::default()
-    });
-    (world, schedule)
+    };
+    Renderer::with_scene(desc, config, 0).expect("the scene has a camera")
 }
 
 fn bench_scenes(c: &mut Criterion) {
@@ -55,14 +48,11 @@ fn bench_scenes(c: &mut Criterion) {
         let mut group = c.benchmark_group(name);
         group.sample_size(10);
         group.throughput(Throughput::Elements((W * H) as u64));
-        let (mut world, mut schedule) = prepare(name);
+        let mut renderer = prepare(name);
         for kind in IntegratorKind::ALL {
-            world.resource_mut::<RenderConfig>().integrator = kind;
+            renderer.config_mut().integrator = kind;
             group.bench_function(kind.name(), |b| {
-                b.iter(|| {
-                    schedule.run(&mut world);
-                    assert!(world.resource::<Frame>().film.is_some());
-                })
+                b.iter(|| assert!(renderer.run().film.is_some()))
             });
         }
         group.finish();
@@ -78,20 +68,15 @@ fn bench_stage_gating(c: &mut Criterion) {
     for transport in [Transport::Whitted, Transport::Path] {
         let mut group = c.benchmark_group(format!("stage_gating/{}", transport.name()));
         group.sample_size(20);
-        let (mut world, mut schedule) = prepare("bench/diffuse_only.toml");
+        let mut renderer = prepare("bench/diffuse_only.toml");
         {
-            let mut config = world.resource_mut::<RenderConfig>();
+            let mut config = renderer.config_mut();
             config.integrator = IntegratorKind::Wavefront;
             config.settings.transport = transport;
         }
         for (name, force_all) in [("gated", false), ("every_stage", true)] {
-            world.insert_resource(StageGating { force_all });
-            group.bench_function(name, |b| {
-                b.iter(|| {
-                    schedule.run(&mut world);
-                    assert!(world.resource::<Frame>().film.is_some());
-                })
-            });
+            renderer.insert_resource(StageGating { force_all });
+            group.bench_function(name, |b| b.iter(|| assert!(renderer.run().film.is_some())));
         }
         group.finish();
     }

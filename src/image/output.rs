@@ -10,7 +10,7 @@
 //! and renamed into place once complete, so a failed render or write never
 //! leaves a truncated image behind.
 
-use std::io::{BufWriter, Write};
+use std::io::{Cursor, Write};
 use std::path::Path;
 
 use image::{ExtendedColorType, ImageEncoder};
@@ -100,9 +100,51 @@ pub fn to_srgb8(c: Color, opts: &PngOptions) -> [u8; 3] {
     [map(c.x), map(c.y), map(c.z)]
 }
 
-/// Writes `film` to `path` in the format its extension names.
+/// Writes `film` to `path` in the format its extension names, through
+/// [`write_atomic`].
 pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
     let format = OutputFormat::from_path(path)?;
+    let err = |message: String| Error::Output {
+        path: path.to_path_buf(),
+        message,
+    };
+    // The EXR encoder seeks back to write its offset table.
+    let mut w = Cursor::new(Vec::new());
+    match format {
+        OutputFormat::Png => {
+            let bytes: Vec<u8> = film
+                .pixels
+                .iter()
+                .flat_map(|&c| to_srgb8(c, opts))
+                .collect();
+            image::codecs::png::PngEncoder::new(&mut w)
+                .write_image(&bytes, film.width, film.height, ExtendedColorType::Rgb8)
+                .map_err(|e| err(e.to_string()))?;
+        }
+        OutputFormat::Exr => {
+            let floats: Vec<f32> = film
+                .pixels
+                .iter()
+                .flat_map(|c| {
+                    let c = if c.is_finite() { *c } else { Color::ZERO };
+                    [c.x, c.y, c.z]
+                })
+                .collect();
+            let bytes: &[u8] = bytemuck::cast_slice::<f32, u8>(&floats);
+            image::codecs::openexr::OpenExrEncoder::new(&mut w)
+                .write_image(bytes, film.width, film.height, ExtendedColorType::Rgb32F)
+                .map_err(|e| err(e.to_string()))?;
+        }
+    }
+    write_atomic(path, &w.into_inner())
+}
+
+/// Writes `bytes` to `path` whole or not at all: into a temporary file in
+/// `path`'s folder, which is synced, given the permissions of an ordinary
+/// new file (temporary files are created readable by their owner only)
+/// and renamed to `path`. On failure `path` is untouched and no temporary
+/// file is left behind. Every file Prism writes goes through here.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let err = |message: String| Error::Output {
         path: path.to_path_buf(),
         message,
@@ -111,59 +153,23 @@ pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let tmp = tempfile::Builder::new()
+    let mut tmp = tempfile::Builder::new()
         .prefix(".prism-")
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(|e| err(format!("cannot create a file in {}: {e}", dir.display())))?;
-    {
-        let mut w = BufWriter::new(tmp.as_file());
-        match format {
-            OutputFormat::Png => {
-                let bytes: Vec<u8> = film
-                    .pixels
-                    .iter()
-                    .flat_map(|&c| to_srgb8(c, opts))
-                    .collect();
-                image::codecs::png::PngEncoder::new(&mut w)
-                    .write_image(&bytes, film.width, film.height, ExtendedColorType::Rgb8)
-                    .map_err(|e| err(e.to_string()))?;
-            }
-            OutputFormat::Exr => {
-                let floats: Vec<f32> = film
-                    .pixels
-                    .iter()
-                    .flat_map(|c| {
-                        let c = if c.is_finite() { *c } else { Color::ZERO };
-                        [c.x, c.y, c.z]
-                    })
-                    .collect();
-                let bytes: &[u8] = bytemuck::cast_slice::<f32, u8>(&floats);
-                image::codecs::openexr::OpenExrEncoder::new(&mut w)
-                    .write_image(bytes, film.width, film.height, ExtendedColorType::Rgb32F)
-                    .map_err(|e| err(e.to_string()))?;
-            }
-        }
-        w.flush().map_err(|e| err(e.to_string()))?;
-    }
+    tmp.write_all(bytes).map_err(|e| err(e.to_string()))?;
     tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
-    persist_readable(tmp, path).map_err(err)
-}
-
-/// Renames a finished temporary file to `path`, first giving it the
-/// permissions of an ordinary new file (temporary files are created
-/// readable by their owner only).
-pub fn persist_readable(tmp: tempfile::NamedTempFile, path: &Path) -> Result<(), String> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file()
             .set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| err(e.to_string()))?;
     }
     tmp.persist(path)
         .map(|_| ())
-        .map_err(|e| e.error.to_string())
+        .map_err(|e| err(e.error.to_string()))
 }
 
 /// Reads an EXR or PNG back as linear radiance (PNG is decoded from sRGB).
@@ -245,6 +251,18 @@ mod tests {
             let mode = std::fs::metadata(&png).unwrap().permissions().mode();
             assert_eq!(mode & 0o777, 0o644, "images are readable by others");
         }
+    }
+
+    #[test]
+    fn write_atomic_replaces_whole_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stats.json");
+        write_atomic(&path, b"first, longer contents").unwrap();
+        write_atomic(&path, b"second").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"second");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let e = write_atomic(&dir.path().join("no/such/dir/a.csv"), b"x").unwrap_err();
+        assert!(e.to_string().contains("a.csv"), "{e}");
     }
 
     #[test]

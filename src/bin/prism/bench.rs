@@ -5,6 +5,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use clap::ValueEnum;
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use glam::{Vec2, Vec3A};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -16,14 +18,37 @@ use prism::core::rng::Sampler;
 use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::integrators::IntegratorKind;
-use prism::integrators::counters::RayCountsJson;
 use prism::integrators::wavefront::StageSeconds;
-use prism::scene::camera::CameraRays;
+use prism::io::desc::SettingsDesc;
+use prism::scene::camera::{Camera, CameraRays};
 use prism::scene::{RenderScene, StreamScratch};
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::wavefront::BatchSize;
+use prism::systems::{Frame, RenderConfig, Renderer};
+
+use crate::args::{BatchPathsFlag, FrameFlags, ThreadsFlag, TransportArg, TransportFlag};
+use crate::stats::RayCountsJson;
 
 /// Options of `prism bench`.
+///
+/// The shared flags keep bench's own, shorter help texts (see
+/// [`crate::args`]); `--transport` also keeps its two-word value
+/// descriptions.
 #[derive(clap::Args, Debug)]
+#[command(
+    mut_arg("threads", |a| a.help("Worker threads [default: one per core]")),
+    mut_arg("width", |a| a.help("Image width [default: the scene's, else 640]")),
+    mut_arg("height", |a| a.help("Image height [default: the scene's, else 480]")),
+    mut_arg("spp", |a| a.help("Samples per pixel [default: the scene's, else 1]")),
+    mut_arg("max_depth", |a| a.help("Maximum depth [default: the scene's, else 8]")),
+    mut_arg("transport", |a| a.value_parser(
+        PossibleValuesParser::new([
+            PossibleValue::new("whitted").help("Whitted transport"),
+            PossibleValue::new("path").help("Path tracing"),
+        ])
+        .map(|v| TransportArg::from_str(&v, false).expect("one of the values listed")),
+    )),
+    mut_arg("batch_paths", |a| a.help("Paths per wavefront batch")),
+)]
 pub struct BenchArgs {
     /// Scene files to measure.
     #[arg(required = true)]
@@ -31,39 +56,21 @@ pub struct BenchArgs {
     /// Renders per integrator and scene (alternating); the median and the fastest are reported.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
-    /// Worker threads [default: one per core].
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// Image width [default: the scene's, else 640].
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height [default: the scene's, else 480].
-    #[arg(long)]
-    pub height: Option<u32>,
-    /// Samples per pixel [default: the scene's, else 1].
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Maximum depth [default: the scene's, else 8].
-    #[arg(long)]
-    pub max_depth: Option<u32>,
-    /// Light transport [default: the scene's, else whitted].
-    #[arg(long, value_enum)]
-    pub transport: Option<TransportChoice>,
-    /// Paths per wavefront batch.
-    #[arg(long, default_value_t = prism::integrators::wavefront::DEFAULT_BATCH_PATHS)]
-    pub batch_paths: usize,
+    /// `--threads`.
+    #[command(flatten)]
+    pub threads: ThreadsFlag,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
+    #[command(flatten)]
+    pub frame: FrameFlags,
+    /// `--transport`.
+    #[command(flatten)]
+    pub transport: TransportFlag,
+    /// `--batch-paths`.
+    #[command(flatten)]
+    pub batch_paths: BatchPathsFlag,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Light transport choices on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum TransportChoice {
-    /// Whitted transport.
-    Whitted,
-    /// Path tracing.
-    Path,
 }
 
 /// One integrator on one scene.
@@ -152,13 +159,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if args.runs == 0 {
         return Err(Error::Invalid("--runs must be at least 1".into()));
     }
-    if args.batch_paths == 0 {
-        return Err(Error::Invalid("--batch-paths must be at least 1".into()));
-    }
-    let (pool, threads) = crate::thread_pool(args.threads)?;
+    let batch_paths = args.batch_paths.get()?;
+    let (pool, threads) = args.threads.pool()?;
     let mut results = Vec::new();
     for scene in &args.scenes {
-        let r = pool.install(|| bench_scene(scene, &args, threads))?;
+        let r = pool.install(|| bench_scene(scene, &args, batch_paths, threads))?;
         if !args.json {
             print_table(&r);
         }
@@ -172,18 +177,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<SceneResult> {
+fn bench_scene(
+    path: &PathBuf,
+    args: &BenchArgs,
+    batch_paths: usize,
+    threads: usize,
+) -> Result<SceneResult> {
     let desc = prism::io::load(path, BuildQuality::Medium)?;
-    let settings = prism::io::desc::SettingsDesc {
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        max_depth: args.max_depth,
-        transport: args.transport.map(|t| match t {
-            TransportChoice::Whitted => prism::core::settings::Transport::Whitted,
-            TransportChoice::Path => prism::core::settings::Transport::Path,
-        }),
-        ..Default::default()
+    let settings = SettingsDesc {
+        transport: args.transport.get(),
+        ..args.frame.desc()
     }
     .resolve(&desc.settings);
     settings
@@ -192,39 +195,34 @@ fn bench_scene(path: &PathBuf, args: &BenchArgs, threads: usize) -> Result<Scene
     if desc.cameras.is_empty() {
         return Err(Error::load(path, "the scene has no camera"));
     }
-    let background = desc.background;
-    let mut world = bevy_ecs::world::World::new();
-    let mut schedule = systems::setup(&mut world);
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(systems::wavefront::BatchSize(args.batch_paths));
-    world.insert_resource(RenderConfig {
-        settings: settings.clone(),
-        camera: Some(cameras[0]),
-        background,
-        ..Default::default()
-    });
+    let mut renderer = Renderer::with_scene(
+        desc,
+        RenderConfig {
+            settings: settings.clone(),
+            ..Default::default()
+        },
+        0,
+    )?;
+    renderer.insert_resource(BatchSize(batch_paths));
 
     let mut times = [Vec::new(), Vec::new()];
     let mut frames: [Vec<Frame>; 2] = [Vec::new(), Vec::new()];
     for _ in 0..args.runs {
         for (k, kind) in IntegratorKind::ALL.into_iter().enumerate() {
-            world.resource_mut::<RenderConfig>().integrator = kind;
-            schedule.run(&mut world);
-            let frame = std::mem::take(&mut *world.resource_mut::<Frame>());
-            if let Some(e) = &frame.error {
-                return Err(Error::Invalid(format!("{}: {e}", path.display())));
-            }
+            renderer.config_mut().integrator = kind;
+            let frame = renderer
+                .render()
+                .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
             times[k].push(frame.render_seconds);
             frames[k].push(frame);
         }
     }
-    let scene = world
-        .resource::<systems::SceneAccel>()
-        .scene
-        .clone()
+    let scene = renderer
+        .scene()
         .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
-    let camera = world
-        .get::<prism::scene::camera::Camera>(cameras[0])
+    let camera = renderer
+        .world()
+        .get::<Camera>(renderer.cameras()[0])
         .cloned()
         .ok_or_else(|| Error::Invalid("camera entity vanished".into()))?;
 
@@ -313,12 +311,7 @@ fn trace_streams(scene: &RenderScene, rays: &[Ray]) -> usize {
 
 /// Closest-hit throughput of camera rays and of incoherent secondary rays
 /// leaving the camera rays' hits in cosine-distributed directions.
-fn throughput(
-    scene: &RenderScene,
-    camera: &prism::scene::camera::Camera,
-    s: &RenderSettings,
-    runs: usize,
-) -> Throughput {
+fn throughput(scene: &RenderScene, camera: &Camera, s: &RenderSettings, runs: usize) -> Throughput {
     let cam = CameraRays::new(camera, s.width, s.height);
     let camera_rays: Vec<Ray> = (0..s.height)
         .flat_map(|y| (0..s.width).map(move |x| (x, y)))

@@ -6,7 +6,8 @@ use serde::Serialize;
 
 use prism::core::error::{Error, Result};
 use prism::image::metrics::{self, Metrics};
-use prism::image::output::{PngOptions, ToneMap};
+
+use crate::args::{ToneMapArg, png_options};
 
 /// Options of `prism compare`.
 #[derive(clap::Args, Debug)]
@@ -25,8 +26,8 @@ pub struct CompareArgs {
     )]
     pub exposure: f32,
     /// Tone map applied to both images before FLIP.
-    #[arg(long, value_enum, default_value_t = crate::ToneMapArg::Clamp)]
-    pub tonemap: crate::ToneMapArg,
+    #[arg(long, value_enum, default_value_t = ToneMapArg::Clamp)]
+    pub tonemap: ToneMapArg,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -43,23 +44,10 @@ struct Report<'a> {
     metrics: Metrics,
 }
 
-/// The display mapping FLIP sees.
-pub fn display(exposure: f32, tonemap: crate::ToneMapArg) -> Result<PngOptions> {
-    if !exposure.is_finite() {
-        return Err(Error::Invalid("--exposure must be finite".into()));
-    }
-    Ok(PngOptions {
-        exposure,
-        tone_map: match tonemap {
-            crate::ToneMapArg::Clamp => ToneMap::Clamp,
-            crate::ToneMapArg::Reinhard => ToneMap::Reinhard,
-        },
-    })
-}
-
 /// Reads both images, computes the metrics and prints them.
 pub fn run(args: CompareArgs) -> Result<()> {
-    let display = display(args.exposure, args.tonemap)?;
+    // The display mapping FLIP sees.
+    let display = png_options(args.exposure, args.tonemap)?;
     let test = metrics::read_exr(&args.test)?;
     let reference = metrics::read_exr(&args.reference)?;
     let m = metrics::compare(&test, &reference, &display).map_err(|e| {

@@ -7,7 +7,7 @@
 //! (`tradeoff.png`, `tradeoff.svg`) with the Pareto front marked.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -19,15 +19,40 @@ use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::image::metrics::{self, Metrics};
-use prism::image::output::PngOptions;
+use prism::image::output::{PngOptions, write_atomic};
 use prism::integrators::IntegratorKind;
 use prism::io::desc::{SceneDesc, SettingsDesc};
 use prism::systems::{self, RenderConfig};
 
+use crate::args::{
+    FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, SeedFlag, ThreadsFlag,
+};
+
 mod plot;
 
 /// Options of `prism tradeoff`.
+///
+/// The shared flags set the base configuration and say so in their help
+/// texts, which replace `prism render`'s (see [`crate::args`]).
 #[derive(clap::Args, Debug)]
+#[command(
+    mut_arg("width", |a| a.help("Base image width [default: the scene's, else 640]")),
+    mut_arg("height", |a| a.help("Base image height [default: the scene's, else 480]")),
+    mut_arg("spp", |a| a.help("Base samples per pixel [default: the scene's, else 1]")),
+    mut_arg("max_depth", |a| a.help("Base maximum depth [default: the scene's, else 8]")),
+    mut_arg("min_contribution", |a| a.help(
+        "Base contribution threshold [default: the scene's, else 0.001]"
+    )),
+    mut_arg("light_samples", |a| a.help(
+        "Base light samples per area light [default: the scene's, else 1]"
+    )),
+    mut_arg("rr_depth", |a| a.help(
+        "Base Russian roulette start depth [default: the scene's, else 3]"
+    )),
+    mut_arg("seed", |a| a.help("Base seed [default: the scene's, else 0]")),
+    mut_arg("integrator", |a| a.help("Integrator for every render")),
+    mut_arg("threads", |a| a.help("Worker threads [default: one per core]")),
+)]
 pub struct TradeoffArgs {
     /// Scene file (.toml, .gltf or .glb).
     pub scene: PathBuf,
@@ -53,40 +78,28 @@ pub struct TradeoffArgs {
     /// Knobs to sweep, comma-separated [default: all].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub knobs: Vec<Knob>,
-    /// Base image width [default: the scene's, else 640].
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Base image height [default: the scene's, else 480].
-    #[arg(long)]
-    pub height: Option<u32>,
-    /// Base samples per pixel [default: the scene's, else 1].
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Base maximum depth [default: the scene's, else 8].
-    #[arg(long)]
-    pub max_depth: Option<u32>,
-    /// Base contribution threshold [default: the scene's, else 0.001].
-    #[arg(long)]
-    pub min_contribution: Option<f32>,
-    /// Base light samples per area light [default: the scene's, else 1].
-    #[arg(long)]
-    pub light_samples: Option<u32>,
-    /// Base Russian roulette start depth [default: the scene's, else 3].
-    #[arg(long, value_name = "DEPTH")]
-    pub rr_depth: Option<u32>,
-    /// Base seed [default: the scene's, else 0].
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Integrator for every render.
-    #[arg(long, value_enum, default_value_t = crate::IntegratorArg::Recursive)]
-    pub integrator: crate::IntegratorArg,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
+    #[command(flatten)]
+    pub frame: FrameFlags,
+    /// `--min-contribution`.
+    #[command(flatten)]
+    pub min_contribution: MinContributionFlag,
+    /// `--light-samples`, `--rr-depth`.
+    #[command(flatten)]
+    pub path: PathFlags,
+    /// `--seed`.
+    #[command(flatten)]
+    pub seed: SeedFlag,
+    /// `--integrator`.
+    #[command(flatten)]
+    pub integrator: IntegratorFlag,
     /// Renders per configuration; the median time is reported (the image
     /// is the same every time).
     #[arg(long, default_value_t = 1)]
     pub runs: usize,
-    /// Worker threads [default: one per core].
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// `--threads`.
+    #[command(flatten)]
+    pub threads: ThreadsFlag,
     /// TrueType font for the plot's text [default: DejaVu Sans from the
     /// usual system folders]. Without one the plot is drawn unlabelled.
     #[arg(long, value_name = "FILE.ttf")]
@@ -322,26 +335,6 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
     s
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let err = |message: String| Error::Output {
-        path: path.to_path_buf(),
-        message,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".prism-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| err(format!("cannot create a file in {}: {e}", dir.display())))?;
-    std::io::Write::write_all(&mut tmp, bytes).map_err(|e| err(e.to_string()))?;
-    tmp.as_file().sync_all().map_err(|e| err(e.to_string()))?;
-    prism::image::output::persist_readable(tmp, path).map_err(err)
-}
-
 /// Renders `config` `runs` times; returns the image, the median seconds
 /// and the rays.
 fn render(
@@ -392,12 +385,12 @@ pub fn run(args: TradeoffArgs) -> Result<()> {
     if args.reference_spp == 0 {
         return Err(Error::Invalid("--reference-spp must be at least 1".into()));
     }
-    let (pool, _threads) = crate::thread_pool(args.threads)?;
+    let (pool, _threads) = args.threads.pool()?;
     pool.install(|| run_in_pool(&args, wall))
 }
 
 fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
-    let integrator: IntegratorKind = args.integrator.into();
+    let integrator = args.integrator.kind();
     let knobs: Vec<Knob> = if args.knobs.is_empty() {
         Knob::ALL.to_vec()
     } else {
@@ -414,16 +407,12 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         return Err(Error::load(&args.scene, "the scene has no camera"));
     }
     let mut settings = SettingsDesc {
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        max_depth: args.max_depth,
-        min_contribution: args.min_contribution,
-        seed: args.seed,
-        exposure: None,
+        min_contribution: args.min_contribution.min_contribution,
+        seed: args.seed.seed,
         transport: Some(Transport::Path),
-        light_samples: args.light_samples,
-        rr_start_depth: args.rr_depth.map(Some),
+        light_samples: args.path.light_samples,
+        rr_start_depth: args.path.rr_depth.map(Some),
+        ..args.frame.desc()
     }
     .resolve(&base_desc.settings);
     if settings.rr_start_depth.is_none() {
@@ -502,7 +491,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     if given_reference.is_none() {
         total += reference_config.settings.height as u64 * reference_config.settings.spp as u64;
     }
-    let bar = crate::progress_bar(
+    let bar = crate::render::progress_bar(
         total,
         args.quiet,
         "{spinner} tradeoff [{bar:30}] {percent}% {elapsed_precise} (eta {eta}) {msg}",

@@ -11,8 +11,9 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use prism::core::error::{Error, Result};
+use prism::image::output::write_atomic;
 
-use super::{Knob, Row, write_atomic};
+use super::{Knob, Row};
 
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (1100, 760);

@@ -1,0 +1,244 @@
+//! Flags more than one subcommand takes, each declared once, and the
+//! values they take.
+//!
+//! Every flag here is a small [`clap::Args`] struct that a subcommand
+//! includes with `#[command(flatten)]` at the place it has always had in
+//! that command's `--help`: `render`, `bench` and `tradeoff` list the flags
+//! they share in different orders, so one struct per group of flags that
+//! stays together in every command keeps each `--help` as it was.
+//!
+//! The doc comments are `prism render`'s help texts. `bench` and
+//! `tradeoff` describe some flags in their own words (shorter, or about
+//! their base configuration); they set those texts with `mut_arg` on their
+//! own argument structs, so only the wording is repeated, never the flag.
+
+use clap::ValueEnum;
+
+use prism::core::error::{Error, Result};
+use prism::core::settings::Transport;
+use prism::geometry::mesh::BuildQuality;
+use prism::image::output::{PngOptions, ToneMap};
+use prism::integrators::IntegratorKind;
+use prism::io::desc::SettingsDesc;
+
+/// `--width`, `--height`, `--spp`, `--max-depth` (render, bench, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct FrameFlags {
+    /// Image width in pixels [default: the scene's, else 640].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels [default: the scene's, else 480].
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Samples per pixel; 1 traces the pixel centre, more are jittered
+    /// over the pixel [default: the scene's, else 1].
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Maximum number of reflection/refraction bounces after the camera
+    /// ray [default: the scene's, else 8].
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+}
+
+impl FrameFlags {
+    /// These flags as overrides of a scene's settings; the other settings
+    /// are left to the scene.
+    pub fn desc(&self) -> SettingsDesc {
+        SettingsDesc {
+            width: self.width,
+            height: self.height,
+            spp: self.spp,
+            max_depth: self.max_depth,
+            ..Default::default()
+        }
+    }
+}
+
+/// `--min-contribution` (render, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct MinContributionFlag {
+    /// Do not trace secondary rays whose contribution to the pixel (largest
+    /// channel of the path weight) is below this [default: the scene's, else 0.001].
+    #[arg(long)]
+    pub min_contribution: Option<f32>,
+}
+
+/// `--seed` (render, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct SeedFlag {
+    /// Seed for pixel jitter [default: the scene's, else 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// `--light-samples`, `--rr-depth` (render, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct PathFlags {
+    /// Path tracing: shadow rays per area light at each hit
+    /// [default: the scene's, else 1].
+    #[arg(long)]
+    pub light_samples: Option<u32>,
+    /// Path tracing: bounce from which Russian roulette may end paths
+    /// [default: the scene's, else 3].
+    #[arg(long, value_name = "DEPTH")]
+    pub rr_depth: Option<u32>,
+}
+
+/// `--threads` (render, bench, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct ThreadsFlag {
+    /// Worker threads [default: one per core]. The image does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+impl ThreadsFlag {
+    /// A rayon pool of that many workers (one per core by default), and
+    /// the number.
+    pub fn pool(&self) -> Result<(rayon::ThreadPool, usize)> {
+        let threads = match self.threads {
+            Some(0) => return Err(Error::Invalid("--threads must be at least 1".into())),
+            Some(n) => n,
+            None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start {threads} threads: {e}")))?;
+        Ok((pool, threads))
+    }
+}
+
+/// `--integrator` (render, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct IntegratorFlag {
+    /// Integrator.
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Recursive)]
+    pub integrator: IntegratorArg,
+}
+
+impl IntegratorFlag {
+    /// The integrator chosen.
+    pub fn kind(&self) -> IntegratorKind {
+        self.integrator.into()
+    }
+}
+
+/// `--transport` (render, bench).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct TransportFlag {
+    /// Light transport [default: the scene's, else whitted].
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportArg>,
+}
+
+impl TransportFlag {
+    /// The transport chosen, if one was.
+    pub fn get(&self) -> Option<Transport> {
+        self.transport.map(Into::into)
+    }
+}
+
+/// `--batch-paths` (render, bench).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct BatchPathsFlag {
+    /// Paths (pixel samples) per wavefront batch: bounds queue memory.
+    #[arg(long, default_value_t = prism::integrators::wavefront::DEFAULT_BATCH_PATHS)]
+    pub batch_paths: usize,
+}
+
+impl BatchPathsFlag {
+    /// The batch size, which must be at least 1.
+    pub fn get(&self) -> Result<usize> {
+        if self.batch_paths == 0 {
+            return Err(Error::Invalid("--batch-paths must be at least 1".into()));
+        }
+        Ok(self.batch_paths)
+    }
+}
+
+/// `--tonemap` (render, compare).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ToneMapArg {
+    /// Clip at 1.
+    Clamp,
+    /// x / (1 + x).
+    Reinhard,
+}
+
+/// `--integrator` (render, tradeoff).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum IntegratorArg {
+    /// Depth-first recursive Whitted tracing, one ray at a time.
+    Recursive,
+    /// Breadth-first wavefront tracing over SoA queues, one ECS system per stage.
+    Wavefront,
+}
+
+impl From<IntegratorArg> for IntegratorKind {
+    fn from(a: IntegratorArg) -> Self {
+        match a {
+            IntegratorArg::Recursive => IntegratorKind::Recursive,
+            IntegratorArg::Wavefront => IntegratorKind::Wavefront,
+        }
+    }
+}
+
+/// `--transport` (render, bench).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum TransportArg {
+    /// Whitted: point lights, mirror reflection and refraction.
+    Whitted,
+    /// Path tracing with next-event estimation and MIS; emissive surfaces
+    /// are area lights.
+    Path,
+}
+
+impl From<TransportArg> for Transport {
+    fn from(a: TransportArg) -> Self {
+        match a {
+            TransportArg::Whitted => Transport::Whitted,
+            TransportArg::Path => Transport::Path,
+        }
+    }
+}
+
+/// `--bvh-quality` (render). The variants have no doc comments on purpose:
+/// clap would list them in `--help`, which shows only the names.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum QualityArg {
+    Fastest,
+    VeryFast,
+    Fast,
+    Medium,
+    Slow,
+    VerySlow,
+}
+
+impl From<QualityArg> for BuildQuality {
+    fn from(q: QualityArg) -> Self {
+        match q {
+            QualityArg::Fastest => BuildQuality::Fastest,
+            QualityArg::VeryFast => BuildQuality::VeryFast,
+            QualityArg::Fast => BuildQuality::Fast,
+            QualityArg::Medium => BuildQuality::Medium,
+            QualityArg::Slow => BuildQuality::Slow,
+            QualityArg::VerySlow => BuildQuality::VerySlow,
+        }
+    }
+}
+
+/// The display mapping of `--exposure` and `--tonemap` (render, compare);
+/// the exposure must be finite.
+pub fn png_options(exposure: f32, tonemap: ToneMapArg) -> Result<PngOptions> {
+    if !exposure.is_finite() {
+        return Err(Error::Invalid("--exposure must be finite".into()));
+    }
+    Ok(PngOptions {
+        exposure,
+        tone_map: match tonemap {
+            ToneMapArg::Clamp => ToneMap::Clamp,
+            ToneMapArg::Reinhard => ToneMap::Reinhard,
+        },
+    })
+}

@@ -1,0 +1,275 @@
+//! `prism render`: one scene file to one image, with optional statistics.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use prism::core::error::{Error, Result};
+use prism::geometry::mesh::BuildQuality;
+use prism::image::output::OutputFormat;
+use prism::io::desc::{Geometry, SettingsDesc};
+use prism::systems::wavefront::BatchSize;
+use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
+
+use crate::args::{
+    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
+    SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
+};
+use crate::stats::{RenderStats, WavefrontStatsJson};
+
+/// Options of `prism render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file: the project's TOML format, or glTF 2.0 (.gltf/.glb).
+    scene: PathBuf,
+    /// Output image. `.png` is 8-bit sRGB after exposure and tone map;
+    /// `.exr` is linear float radiance exactly as computed.
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+    /// `--width`, `--height`, `--spp`, `--max-depth`.
+    #[command(flatten)]
+    frame: FrameFlags,
+    /// `--min-contribution`.
+    #[command(flatten)]
+    min_contribution: MinContributionFlag,
+    /// `--threads`.
+    #[command(flatten)]
+    threads: ThreadsFlag,
+    /// `--seed`.
+    #[command(flatten)]
+    seed: SeedFlag,
+    /// Which camera to render from, counting from 0 in file order (the
+    /// scene file's own camera first, then those of included glTF files).
+    #[arg(long, default_value_t = 0)]
+    camera: usize,
+    /// Exposure in stops for PNG output: radiance is scaled by 2^EV
+    /// [default: the scene's, else 0].
+    #[arg(long, value_name = "EV", allow_hyphen_values = true)]
+    exposure: Option<f32>,
+    /// Tone map for PNG output.
+    #[arg(long, value_enum, default_value_t = ToneMapArg::Clamp)]
+    tonemap: ToneMapArg,
+    /// `--integrator`.
+    #[command(flatten)]
+    integrator: IntegratorFlag,
+    /// `--transport`.
+    #[command(flatten)]
+    transport: TransportFlag,
+    /// `--light-samples`, `--rr-depth`.
+    #[command(flatten)]
+    path: PathFlags,
+    /// Path tracing: never end paths by Russian roulette (unbiased either
+    /// way; roulette trades variance for speed).
+    #[arg(long, conflicts_with = "rr_depth")]
+    no_russian_roulette: bool,
+    /// BVH build preset, from fastest build to best traversal.
+    #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
+    bvh_quality: QualityArg,
+    /// `--batch-paths`.
+    #[command(flatten)]
+    batch_paths: BatchPathsFlag,
+    /// Write timings, ray counts and scene sizes as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    stats: Option<PathBuf>,
+    /// No progress bar or summary line.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+/// Renders the scene and writes the image (and the statistics).
+pub fn run(args: RenderArgs) -> Result<()> {
+    let wall = Instant::now();
+    // Fail on a bad output name before spending time on the render.
+    OutputFormat::from_path(&args.output)?;
+    if let Some(s) = &args.stats
+        && s.extension().and_then(|e| e.to_str()) != Some("json")
+    {
+        return Err(Error::Invalid(format!(
+            "--stats {}: the statistics file must end in .json",
+            s.display()
+        )));
+    }
+    let (pool, threads) = args.threads.pool()?;
+    pool.install(|| render_with_pool(&args, threads, wall))
+}
+
+fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
+    let quality: BuildQuality = args.bvh_quality.into();
+    let load_start = Instant::now();
+    let desc = prism::io::load(&args.scene, quality)?;
+    let load_seconds = load_start.elapsed().as_secs_f64();
+    let mut mesh_build_seconds = 0.0;
+    let mut seen = std::collections::HashSet::new();
+    for o in &desc.objects {
+        if let Geometry::Mesh(m) = &o.geometry
+            && seen.insert(Arc::as_ptr(m))
+        {
+            mesh_build_seconds += m.build_seconds;
+        }
+    }
+
+    let s = &desc.settings;
+    let settings = SettingsDesc {
+        min_contribution: args.min_contribution.min_contribution,
+        seed: args.seed.seed,
+        transport: args.transport.get(),
+        light_samples: args.path.light_samples,
+        rr_start_depth: if args.no_russian_roulette {
+            Some(None)
+        } else {
+            args.path.rr_depth.map(Some)
+        },
+        ..args.frame.desc()
+    }
+    .resolve(s);
+    settings.validate().map_err(|e| {
+        Error::Invalid(format!(
+            "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
+            args.scene.display()
+        ))
+    })?;
+    let png = png_options(args.exposure.or(s.exposure).unwrap_or(0.0), args.tonemap)?;
+    // The CLI's own words for camera problems, before Renderer::with_scene
+    // would give its more general ones.
+    let camera_count = desc.cameras.len();
+    if camera_count == 0 {
+        return Err(Error::load(
+            &args.scene,
+            "the scene has no camera (add a [camera] table or a glTF camera)",
+        ));
+    }
+    if args.camera >= camera_count {
+        return Err(Error::Invalid(format!(
+            "--camera {}: the scene has {camera_count} camera(s), numbered from 0",
+            args.camera
+        )));
+    }
+    let light_count = desc.lights.len();
+
+    let bar = progress_bar(
+        settings.height as u64,
+        args.quiet,
+        "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
+    );
+    let progress: Option<systems::ProgressFn> = bar.clone().map(|b| {
+        let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
+        f
+    });
+    let mut renderer = Renderer::with_scene(
+        desc,
+        RenderConfig {
+            settings: settings.clone(),
+            integrator: args.integrator.kind(),
+            bvh_quality: quality,
+            progress,
+            ..Default::default()
+        },
+        args.camera,
+    )?;
+    let batch_paths = args.batch_paths.get()?;
+    renderer.insert_resource(BatchSize(batch_paths));
+    renderer.run();
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+
+    let accel = renderer.world().resource::<SceneAccel>();
+    let tlas_seconds = accel.build_seconds;
+    let (triangles, primitives) = accel
+        .scene
+        .as_ref()
+        .map_or((0, 0), |s| (s.triangle_count(), s.instances.len()));
+    let features = accel
+        .scene
+        .as_ref()
+        .map(|s| prism::scene::features::SceneFeatures::of(s))
+        .unwrap_or_default();
+    let frame = renderer.world().resource::<Frame>();
+    if let Some(e) = &frame.error {
+        return Err(Error::Invalid(format!("{}: {e}", args.scene.display())));
+    }
+    let Some(film) = &frame.film else {
+        return Err(Error::Invalid("the renderer produced no image".into()));
+    };
+    prism::image::output::write_image(&args.output, film, &png)?;
+
+    let rays = frame.counters.rays;
+    let render_seconds = frame.render_seconds;
+    let stats = RenderStats {
+        scene: args.scene.display().to_string(),
+        integrator: args.integrator.kind().name().into(),
+        transport: settings.transport.name().into(),
+        features,
+        wall_seconds: wall.elapsed().as_secs_f64(),
+        load_seconds,
+        bvh_build_seconds: mesh_build_seconds + tlas_seconds,
+        render_seconds,
+        rays: rays.into(),
+        mrays_per_second: rays.total() as f64 / render_seconds.max(1e-9) / 1e6,
+        width: settings.width,
+        height: settings.height,
+        spp: settings.spp,
+        max_depth: settings.max_depth,
+        threads,
+        triangles,
+        primitives,
+        lights: light_count,
+        nonfinite_samples: frame.counters.nonfinite_samples,
+        wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
+            stage_seconds: w.stages,
+            peak_queue_bytes: w.peak_queue_bytes,
+            batches: w.batches,
+            batch_paths,
+            stages_run: w.runs.names_run(),
+            stage_runs: w.runs,
+        }),
+    };
+    if let Some(path) = &args.stats {
+        write_stats(path, &stats)?;
+    }
+    if !args.quiet {
+        eprintln!(
+            "{}: {}x{} at {} spp in {:.3} s ({} rays, {:.2} Mrays/s, {} threads){}",
+            args.output.display(),
+            stats.width,
+            stats.height,
+            stats.spp,
+            stats.render_seconds,
+            rays.total(),
+            stats.mrays_per_second,
+            threads,
+            if stats.nonfinite_samples > 0 {
+                format!(", {} non-finite samples dropped", stats.nonfinite_samples)
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok(())
+}
+
+/// A progress bar on stderr of `total` steps drawn with the indicatif
+/// `template`, or `None` when `quiet`. It is hidden automatically when
+/// stderr is not a terminal.
+pub(crate) fn progress_bar(total: u64, quiet: bool, template: &str) -> Option<ProgressBar> {
+    if quiet {
+        return None;
+    }
+    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(template)
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    Some(bar)
+}
+
+fn write_stats(path: &Path, stats: &RenderStats) -> Result<()> {
+    let json = serde_json::to_string_pretty(stats).map_err(|e| Error::Output {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    prism::image::output::write_atomic(path, json.as_bytes())
+}
