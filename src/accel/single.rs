@@ -141,3 +141,23 @@ pub fn traverse_bvh(
     }
     any
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// obvhs's fixed stack overwrites its last entry past 31; the spill
+    /// stack must give back every entry, last in first out.
+    #[test]
+    fn spill_stack_keeps_every_entry() {
+        let mut s = SpillStack::default();
+        for i in 0..100 {
+            s.push(UVec2::new(i, 0));
+        }
+        assert_eq!(s.len(), 100);
+        for i in (0..100).rev() {
+            assert_eq!(s.pop_fast(), UVec2::new(i, 0));
+        }
+        assert!(s.is_empty());
+    }
+}

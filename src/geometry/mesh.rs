@@ -407,14 +407,14 @@ mod tests {
     use super::*;
     use crate::accel::build::cwbvh_depth;
 
-    /// Small triangles at geometrically growing distances along a line:
-    /// each triangle's nearest neighbour is the next smaller one, so the
-    /// builder can only chain them (one level per merge) and the 8-wide
-    /// tree is about a seventh as deep as the triangles are many.
+    /// Small triangles at geometrically growing distances along a line,
+    /// from 1e-30 up: each triangle's nearest neighbour is the next
+    /// smaller one, and the smallest share one Morton cell, so the builder
+    /// chains them (150 triangles give a tree 58 levels deep).
     fn deep_soup(n: u32) -> MeshData {
         let mut data = MeshData::default();
         for i in 0..n {
-            let x = 1.1f32.powi(i as i32) * 1e-3;
+            let x = 1.5f32.powi(i as i32) * 1e-30;
             let s = 0.02 * x;
             let k = data.positions.len() as u32;
             data.positions.push(Vec3::new(x - s, -s, 0.0));
@@ -425,15 +425,17 @@ mod tests {
         data
     }
 
-    /// Trees deeper than 32 levels, which only degenerate input produces:
-    /// packet traversal used to panic on its fixed stack there, and
-    /// obvhs's single-ray stack silently overwrote its last entry (losing
-    /// subtrees). Every traversal must find what brute force finds.
+    /// Trees deeper than 32 levels, which only degenerate input produces
+    /// (obvhs checks depth in debug builds only): every traversal must
+    /// find what brute force finds. This chain-like tree never has more
+    /// than a few groups pending; the stacks' spilling past their fixed
+    /// capacity, which a deep tree with branching needs, is tested in
+    /// `accel::single` directly.
     #[test]
     fn deep_trees_are_traversed_completely() {
         let mesh = Mesh::new(
             "soup",
-            deep_soup(320),
+            deep_soup(150),
             NormalMode::Flat,
             BuildQuality::Medium,
         )
@@ -451,9 +453,9 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (s >> 40) as f32 / (1u64 << 24) as f32
         };
-        for i in 0..640 {
+        for i in 0..300 {
             // Straight down onto triangle i / 2, near its centre, or beside it.
-            let x = 1.1f32.powi((i / 2) as i32) * 1e-3;
+            let x = 1.5f32.powi((i / 2) as i32) * 1e-30;
             let dx = (next() - 0.5) * 0.05 * x;
             let dy = (next() - 0.5) * 0.05 * x;
             let o = Vec3A::new(x + dx, dy, x);
@@ -495,6 +497,6 @@ mod tests {
                 assert_eq!(mesh.occluded(r, 0.0, f32::INFINITY), want.is_some());
             }
         }
-        assert!(hits > 200, "only {hits} of the rays hit the soup");
+        assert!(hits > 50, "only {hits} of the rays hit the soup");
     }
 }
