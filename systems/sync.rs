@@ -203,7 +203,7 @@ pub fn prepare_sync(world: &mut World) {
             quality,
         )));
     } else if let Some(s) = accel.scene.as_mut().and_then(Arc::get_mut)
-        && s.background != background
+        && s.background() != background
     {
         s.set_background(background);
     }

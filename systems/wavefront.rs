@@ -393,7 +393,7 @@ pub fn handle_escaped_rays(
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::HandleEscapedRays, |_| {
-        kernels::handle_escaped_rays(&escaped.0, frame.scene.background, &mut radiance.0);
+        kernels::handle_escaped_rays(&escaped.0, frame.scene.background(), &mut radiance.0);
         escaped.0.clear();
     });
 }
@@ -550,7 +550,7 @@ pub fn render_wavefront(world: &mut World) {
     };
     let config = world.resource::<RenderConfig>().clone();
     let settings = &config.settings;
-    let classes: Vec<MaterialClass> = scene.materials.iter().map(|m| m.class()).collect();
+    let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
     let shadows = features.needs_shadow_rays(settings.transport);
     let batch_size = world.resource::<BatchSize>().0;

@@ -162,8 +162,8 @@ fn same_hit(
                 assert_eq!(a.shading_normal, b.shading_normal, "{what}: shading normal");
                 assert_eq!(a.uv, b.uv, "{what}: uv");
                 assert_eq!(
-                    format!("{:?}", sa.materials[a.material as usize]),
-                    format!("{:?}", sb.materials[b.material as usize]),
+                    format!("{:?}", sa.materials()[a.material as usize]),
+                    format!("{:?}", sb.materials()[b.material as usize]),
                     "{what}: material"
                 );
             }
@@ -189,20 +189,20 @@ fn compare_with_scratch(world: &mut World, rng: &mut Rng, step: usize) {
     let sync = world.resource::<SceneSync>();
     let scene = world.resource::<SceneAccel>().scene.clone().unwrap();
     assert_eq!(
-        scene.instances.len(),
-        scratch.instances.len(),
+        scene.instances().len(),
+        scratch.instances().len(),
         "step {step}"
     );
-    assert_eq!(scene.lights, scratch.lights, "step {step}");
+    assert_eq!(scene.lights(), scratch.lights(), "step {step}");
     let entity_of = |i: u32| sync.entity(i).unwrap();
     let mut rays = Vec::new();
     for _ in 0..200 {
         let origin = rng.vec(16.0);
-        let target = if rng.below(2) == 0 || scratch.instances.is_empty() {
+        let target = if rng.below(2) == 0 || scratch.instances().is_empty() {
             rng.vec(10.0)
         } else {
-            let i = rng.below(scratch.instances.len());
-            let c = scratch.instances[i].transform.to_world.translation;
+            let i = rng.below(scratch.instances().len());
+            let c = scratch.instances()[i].transform.to_world.translation;
             Vec3::from(c) + rng.vec(0.8)
         };
         let d = Vec3A::from(target - origin).normalize_or(Vec3A::Y);
@@ -592,7 +592,7 @@ fn area_lights_follow_moves_and_material_changes() {
             run_frame(world, schedule);
             let film = world.resource::<Frame>().film.clone().unwrap();
             let (scene, _) = scene_from_scratch(world, Color::ZERO, BuildQuality::Medium).unwrap();
-            assert!(!scene.emitters.is_empty() || what == "dark");
+            assert!(!scene.emitters().is_empty() || what == "dark");
             let mut q = world.query::<&Camera>();
             let camera = q.single(world).unwrap().clone();
             let reference =

@@ -36,7 +36,7 @@ fn counters(world: &World) -> (TlasCounters, TlasUpdate, u64) {
 fn material_hit(world: &World, ray: &Ray) -> Color {
     let scene = world.resource::<SceneAccel>().scene.clone().unwrap();
     let hit = scene.intersect(ray, 0.0, f32::INFINITY).expect("hit");
-    scene.materials[hit.material as usize].base_color
+    scene.materials()[hit.material as usize].base_color
 }
 
 #[test]

@@ -210,7 +210,7 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::Temp
         .unwrap()
         .clone();
     let config = world.resource::<RenderConfig>().settings.clone();
-    let classes: Vec<MaterialClass> = scene.materials.iter().map(|m| m.class()).collect();
+    let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = prism::scene::features::SceneFeatures::of(&scene);
     let shadows = features.needs_shadow_rays(config.transport);
     world.insert_resource(WavefrontFrame {

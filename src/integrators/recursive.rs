@@ -28,12 +28,12 @@ pub fn trace(
     counters: &mut RenderCounters,
 ) -> Color {
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
-        return scene.background;
+        return scene.background();
     };
     let it = Interaction::new(scene, ray, &hit);
     let mut radiance = it.surface.emission;
     if it.is_lit_by_lights() {
-        for light in &scene.lights {
+        for light in scene.lights() {
             if let Some(q) = direct_light(&it, light) {
                 counters.rays.shadow += 1;
                 if !scene.occluded(&q.ray, 0.0, q.t_max) {
@@ -76,7 +76,7 @@ pub fn trace_path(
     let mut depth = 0;
     loop {
         let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
-            radiance += throughput * scene.background;
+            radiance += throughput * scene.background();
             return radiance;
         };
         let it = Interaction::new(scene, &ray, &hit);

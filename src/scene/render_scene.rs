@@ -15,16 +15,16 @@ use crate::scene::material::Material;
 #[derive(Debug)]
 pub struct RenderScene {
     /// All instances; the top-level BVH indexes this array.
-    pub instances: Vec<Instance>,
+    pub(super) instances: Vec<Instance>,
     /// Materials referenced by instances.
-    pub materials: Vec<Material>,
+    pub(super) materials: Vec<Material>,
     /// Lights in world space.
-    pub lights: Vec<WorldLight>,
+    pub(super) lights: Vec<WorldLight>,
     /// Radiance of escaped rays.
-    pub background: Color,
+    pub(super) background: Color,
     /// Emissive surfaces as area lights, for path tracing (rebuilt by
     /// [`RenderScene::commit`] when instances or materials change).
-    pub emitters: EmitterTable,
+    pub(super) emitters: EmitterTable,
     /// Set by changes to instances or materials: the emitter table is
     /// rebuilt at the next commit.
     pub(super) emitters_stale: bool,
@@ -34,7 +34,7 @@ pub struct RenderScene {
     pub(super) tlas: Tlas,
     /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
     /// or by the last [`RenderScene::commit`] that changed it).
-    pub tlas_build_seconds: f64,
+    pub(super) tlas_build_seconds: f64,
 }
 
 impl RenderScene {
@@ -71,5 +71,36 @@ impl RenderScene {
                 InstanceGeometry::Shape(_) => 0,
             })
             .sum()
+    }
+
+    /// All instances; the top-level BVH indexes this array.
+    pub fn instances(&self) -> &[Instance] {
+        &self.instances
+    }
+
+    /// Materials referenced by instances.
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
+    /// Lights in world space.
+    pub fn lights(&self) -> &[WorldLight] {
+        &self.lights
+    }
+
+    /// Radiance of escaped rays.
+    pub fn background(&self) -> Color {
+        self.background
+    }
+
+    /// Emissive surfaces as area lights, for path tracing.
+    pub fn emitters(&self) -> &EmitterTable {
+        &self.emitters
+    }
+
+    /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
+    /// or by the last [`RenderScene::commit`] that changed it).
+    pub fn tlas_build_seconds(&self) -> f64 {
+        self.tlas_build_seconds
     }
 }

@@ -50,7 +50,7 @@ impl Interaction {
             ns,
             wo,
             front_face,
-            surface: scene.materials[hit.material as usize].sample(hit.uv),
+            surface: scene.materials()[hit.material as usize].sample(hit.uv),
         }
     }
 

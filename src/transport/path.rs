@@ -234,12 +234,12 @@ pub fn next_event(
     if !it.is_lit_by_lights() {
         return;
     }
-    for light in &scene.lights {
+    for light in scene.lights() {
         if let Some(q) = direct_light(it, light) {
             emit(q);
         }
     }
-    if scene.emitters.is_empty() {
+    if scene.emitters().is_empty() {
         return;
     }
     let n = settings.light_samples;
@@ -248,8 +248,8 @@ pub fn next_event(
         let u = sampler.next_f32();
         let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
         let Some(ls) = scene
-            .emitters
-            .sample(&scene.instances, &scene.materials, u, v)
+            .emitters()
+            .sample(&scene.instances(), &scene.materials(), u, v)
         else {
             continue;
         };
@@ -316,8 +316,8 @@ pub fn emitted(
         return le;
     }
     let pdf_area = scene
-        .emitters
-        .pdf_area(&scene.instances, instance, it.point);
+        .emitters()
+        .pdf_area(&scene.instances(), instance, it.point);
     if pdf_area <= 0.0 {
         return le;
     }

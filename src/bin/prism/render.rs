@@ -180,7 +180,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let (triangles, primitives) = accel
         .scene
         .as_ref()
-        .map_or((0, 0), |s| (s.triangle_count(), s.instances.len()));
+        .map_or((0, 0), |s| (s.triangle_count(), s.instances().len()));
     let features = accel
         .scene
         .as_ref()

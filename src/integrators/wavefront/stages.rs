@@ -107,7 +107,7 @@ pub fn intersect_closest(
 ) {
     // Streams pay only where there is a mesh to traverse.
     let use_streams = scene
-        .instances
+        .instances()
         .iter()
         .any(|i| matches!(i.geometry, InstanceGeometry::Mesh(_)));
     let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
@@ -204,7 +204,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
             out.emit(h.path, h.throughput * it.surface.emission);
         }
         if LIT && it.is_lit_by_lights() {
-            for light in &scene.lights {
+            for light in scene.lights() {
                 if let Some(q) = direct_light(it, light) {
                     out.push_shadow(h, q);
                 }
