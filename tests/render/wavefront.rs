@@ -92,7 +92,7 @@ fn both_integrators_give_the_same_image_on_every_scene() {
 
 #[test]
 fn test_scenes_match_too() {
-    // The analytic scenes of tests/render.rs, through both integrators.
+    // The analytic scenes of tests/render/analytic.rs, through both integrators.
     let dir = tempfile::tempdir().unwrap();
     let lens = scenes::write(
         dir.path(),
