@@ -3,9 +3,11 @@
 //! for a scene without meshes.
 //!
 //! No test in this file loads a mesh, so the process-wide count of
-//! triangle BVH builds is this file's own.
+//! triangle BVH builds is this file's own: `cargo test --test gating` is
+//! a binary of its own for that reason (not a module of `render`).
 
-use bevy_ecs::prelude::*;
+mod common;
+
 use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::integrators::IntegratorKind;
@@ -13,67 +15,53 @@ use prism::integrators::wavefront::queues::QueueBytes;
 use prism::integrators::wavefront::{Stage, StageRuns};
 use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{ShadowRays, StageGating, StageScratch, hit_queue};
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::{Frame, Renderer};
+
+use common::render::{config, renderer};
+use common::scenes::{load_toml, sphere_on_disk};
 
 /// Spheres and a disk, all Lambertian, one point light.
-const DIFFUSE_ONLY: &str = r#"
-[camera]
-look_from = [0, 1, 6]
-look_at = [0, 0.5, 0]
-[[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { color = 0.7 }
-[[objects]]
+fn diffuse_only() -> String {
+    sphere_on_disk(
+        "{ color = 0.7 }",
+        r#"[[objects]]
 shape = { type = "sphere", radius = 0.4 }
 translate = [1.5, 0.4, 0]
 material = { color = [0.2, 0.6, 0.3] }
-[[objects]]
-shape = { type = "disk", radius = 3.0 }
-material = { color = 0.5 }
-[[lights]]
-type = "point"
-position = [2, 4, 3]
-intensity = 30
-"#;
-
-/// Renders `toml` with the wavefront integrator and returns the world
-/// after the frame, with its queues and scratch buffers as they were left.
-fn wavefront_world(toml: &str, transport: Transport, force_all: bool) -> World {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.toml");
-    std::fs::write(&path, toml).unwrap();
-    let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
-    let mut world = World::new();
-    let mut schedule = systems::setup(&mut world);
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(StageGating { force_all });
-    world.insert_resource(RenderConfig {
-        settings: RenderSettings {
-            width: 32,
-            height: 24,
-            spp: 2,
-            max_depth: 4,
-            transport,
-            ..Default::default()
-        },
-        integrator: IntegratorKind::Wavefront,
-        camera: Some(cameras[0]),
-        ..Default::default()
-    });
-    schedule.run(&mut world);
-    assert!(world.resource::<Frame>().film.is_some());
-    world
+"#,
+    )
 }
 
-fn runs(world: &World) -> StageRuns {
-    world.resource::<Frame>().wavefront.unwrap().runs
+/// Renders `toml` with the wavefront integrator and returns the renderer
+/// after the frame, with its queues and scratch buffers as they were left.
+fn wavefront_world(toml: &str, transport: Transport, force_all: bool) -> Renderer {
+    let settings = RenderSettings {
+        width: 32,
+        height: 24,
+        spp: 2,
+        max_depth: 4,
+        transport,
+        ..Default::default()
+    };
+    let mut r = renderer(
+        load_toml(toml).unwrap(),
+        config(settings, IntegratorKind::Wavefront),
+    );
+    r.insert_resource(StageGating { force_all });
+    assert!(r.run().film.is_some());
+    r
+}
+
+fn runs(r: &Renderer) -> StageRuns {
+    r.world().resource::<Frame>().wavefront.unwrap().runs
 }
 
 #[test]
 fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
     for transport in [Transport::Whitted, Transport::Path] {
-        let world = wavefront_world(DIFFUSE_ONLY, transport, false);
-        let r = runs(&world);
+        let renderer = wavefront_world(&diffuse_only(), transport, false);
+        let world = renderer.world();
+        let r = runs(&renderer);
         assert_eq!(r.get(Stage::ShadeMirror), 0, "{transport:?}");
         assert_eq!(r.get(Stage::ShadeGlass), 0, "{transport:?}");
         assert_eq!(r.get(Stage::ShadeGeneral), 0, "{transport:?}");
@@ -126,26 +114,30 @@ fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
 
 #[test]
 fn forcing_every_stage_runs_them_all_and_changes_nothing() {
-    let gated = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, false);
-    let forced = wavefront_world(DIFFUSE_ONLY, Transport::Whitted, true);
+    let gated = wavefront_world(&diffuse_only(), Transport::Whitted, false);
+    let forced = wavefront_world(&diffuse_only(), Transport::Whitted, true);
     let r = runs(&forced);
     assert!(Stage::ALL.iter().all(|&s| r.get(s) > 0), "{r:?}");
-    let a = gated.resource::<Frame>().film.as_ref().unwrap();
-    let b = forced.resource::<Frame>().film.as_ref().unwrap();
+    let a = gated.world().resource::<Frame>().film.as_ref().unwrap();
+    let b = forced.world().resource::<Frame>().film.as_ref().unwrap();
     assert!(a.pixels == b.pixels);
 }
 
 #[test]
 fn a_scene_without_lights_traces_no_shadow_rays() {
-    let unlit = DIFFUSE_ONLY.replace(
+    let unlit = diffuse_only().replace(
         "[[lights]]\ntype = \"point\"\nposition = [2, 4, 3]\nintensity = 30\n",
         "",
     );
     assert!(!unlit.contains("[[lights]]"));
     for transport in [Transport::Whitted, Transport::Path] {
-        let world = wavefront_world(&unlit, transport, false);
-        assert_eq!(runs(&world).get(Stage::TraceShadowRays), 0, "{transport:?}");
-        assert_eq!(world.resource::<ShadowRays>().0.bytes(), 0);
+        let renderer = wavefront_world(&unlit, transport, false);
+        assert_eq!(
+            runs(&renderer).get(Stage::TraceShadowRays),
+            0,
+            "{transport:?}"
+        );
+        assert_eq!(renderer.world().resource::<ShadowRays>().0.bytes(), 0);
     }
     // An emissive sphere lights the scene only under path transport.
     let glowing = format!(
@@ -164,12 +156,8 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
 fn a_sphere_only_scene_builds_no_triangle_bvh() {
     let before = prism::geometry::mesh::mesh_bvh_builds();
     for transport in [Transport::Whitted, Transport::Path] {
-        let world = wavefront_world(DIFFUSE_ONLY, transport, false);
-        let scene = world
-            .resource::<systems::SceneAccel>()
-            .scene
-            .clone()
-            .unwrap();
+        let renderer = wavefront_world(&diffuse_only(), transport, false);
+        let scene = renderer.scene().unwrap();
         let features = prism::scene::features::SceneFeatures::of(&scene);
         assert_eq!(features.mesh_instances, 0, "{transport:?}");
         assert_eq!(features.shapes, ["disk", "sphere"]);

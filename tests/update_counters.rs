@@ -3,7 +3,10 @@
 //! material touches no BVH at all.
 //!
 //! This file holds a single test: the mesh BVH counter is process-wide,
-//! and no other test may build meshes while it runs.
+//! and no other test may build meshes while it runs, so
+//! `cargo test --test update_counters` is a binary of its own.
+
+mod common;
 
 use std::sync::Arc;
 
@@ -21,6 +24,8 @@ use prism::scene::material::Material;
 use prism::systems::MeshInstance;
 use prism::systems::sync::SceneSync;
 use prism::systems::{Frame, PrismPlugin, SceneAccel, run_frame};
+
+use common::render::plugin_world;
 
 fn knot(p: u32, q: u32) -> Arc<Mesh> {
     let data = prism::geometry::procedural::torus_knot(p, q, 1.0, 0.3, 64, 8);
@@ -44,16 +49,12 @@ fn each_change_does_only_its_own_work() {
     let knots = [knot(2, 3), knot(3, 5)];
     let built = mesh_bvh_builds();
     assert!(built >= 2);
-    let mut world = World::new();
-    let mut schedule = Schedule::default();
-    PrismPlugin::new()
-        .settings(RenderSettings {
-            width: 16,
-            height: 12,
-            max_depth: 2,
-            ..Default::default()
-        })
-        .build(&mut world, &mut schedule);
+    let (mut world, mut schedule) = plugin_world(PrismPlugin::new().settings(RenderSettings {
+        width: 16,
+        height: 12,
+        max_depth: 2,
+        ..Default::default()
+    }));
     // 20 objects on a grid: one change is 5% churn, below the threshold.
     let mut objects = Vec::new();
     for i in 0..20 {

@@ -7,35 +7,13 @@ use std::sync::Arc;
 
 use glam::{Quat, Vec3, Vec3A};
 use prism::core::math::Ray;
-use prism::core::rng::Sampler;
 use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
 use prism::geometry::shapes::Shape;
 use prism::geometry::transform::Transform;
 use prism::scene::material::Material;
 use prism::scene::{Instance, InstanceGeometry, RenderScene};
 
-struct Rng(Sampler);
-
-impl Rng {
-    fn new(seed: u64) -> Self {
-        Rng(Sampler::new(seed, 0, 0))
-    }
-    fn f(&mut self) -> f32 {
-        self.0.next_f32()
-    }
-    fn range(&mut self, a: f32, b: f32) -> f32 {
-        a + (b - a) * self.f()
-    }
-    fn vec(&mut self, a: f32, b: f32) -> Vec3 {
-        Vec3::new(self.range(a, b), self.range(a, b), self.range(a, b))
-    }
-    fn dir(&mut self) -> Vec3 {
-        let z = self.range(-1.0, 1.0);
-        let phi = self.range(0.0, 2.0 * PI);
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-}
+use crate::common::rng::{Random, SamplerRng as Rng};
 
 /// A triangle soup of `n` random triangles in the unit cube.
 fn soup(rng: &mut Rng, n: usize) -> Mesh {

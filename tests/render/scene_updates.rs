@@ -23,30 +23,8 @@ use prism::systems::{
     self, Frame, PrismPlugin, ProgressiveRendering, RenderConfig, SceneAccel, run_frame,
 };
 
-/// A small deterministic generator (splitmix64) so that failures replay.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-    fn vec(&mut self, r: f32) -> Vec3 {
-        Vec3::new(self.range(-r, r), self.range(-r, r), self.range(-r, r))
-    }
-}
+use crate::common::render::plugin_world;
+use crate::common::rng::{Random, SplitMix64 as Rng};
 
 fn meshes() -> Vec<Arc<Mesh>> {
     [(2, 3, 48, 8), (3, 4, 40, 6), (2, 5, 24, 5)]
@@ -68,9 +46,9 @@ fn random_transform(rng: &mut Rng) -> Transform {
         // Invalid: the frame must fail until it is fixed.
         return Transform(Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)));
     }
-    let axis = rng.vec(1.0).normalize_or(Vec3::Y);
+    let axis = rng.vec(-1.0, 1.0).normalize_or(Vec3::Y);
     Transform::from_trs(
-        rng.vec(10.0),
+        rng.vec(-10.0, 10.0),
         Quat::from_axis_angle(axis, rng.range(0.0, 6.3)),
         Vec3::splat(rng.range(0.3, 2.0)),
     )
@@ -116,17 +94,13 @@ fn random_geometry(world: &mut World, e: Entity, rng: &mut Rng, meshes: &[Arc<Me
 }
 
 fn new_world(spp: u32) -> (World, Schedule) {
-    let mut world = World::new();
-    let mut schedule = Schedule::default();
-    PrismPlugin::new()
-        .settings(RenderSettings {
-            width: 8,
-            height: 6,
-            spp,
-            max_depth: 2,
-            ..Default::default()
-        })
-        .build(&mut world, &mut schedule);
+    let (mut world, schedule) = plugin_world(PrismPlugin::new().settings(RenderSettings {
+        width: 8,
+        height: 6,
+        spp,
+        max_depth: 2,
+        ..Default::default()
+    }));
     world.spawn(Camera {
         look_from: Vec3::new(0.0, 3.0, 25.0),
         ..Default::default()
@@ -197,13 +171,13 @@ fn compare_with_scratch(world: &mut World, rng: &mut Rng, step: usize) {
     let entity_of = |i: u32| sync.entity(i).unwrap();
     let mut rays = Vec::new();
     for _ in 0..200 {
-        let origin = rng.vec(16.0);
+        let origin = rng.vec(-16.0, 16.0);
         let target = if rng.below(2) == 0 || scratch.instances().is_empty() {
-            rng.vec(10.0)
+            rng.vec(-10.0, 10.0)
         } else {
             let i = rng.below(scratch.instances().len());
             let c = scratch.instances()[i].transform.to_world.translation;
-            Vec3::from(c) + rng.vec(0.8)
+            Vec3::from(c) + rng.vec(-0.8, 0.8)
         };
         let d = Vec3A::from(target - origin).normalize_or(Vec3A::Y);
         rays.push(Ray::new(origin.into(), d));
@@ -302,7 +276,7 @@ fn random_sequence(seed: u64, policy: TlasPolicy, steps: usize) {
                     }
                 }
                 _ => {
-                    let p = rng.vec(8.0);
+                    let p = rng.vec(-8.0, 8.0);
                     *world.get_mut::<Transform>(light).unwrap() = Transform::from_translation(p);
                 }
             }
@@ -367,26 +341,25 @@ fn reference_film(world: &mut World, spp: u32) -> prism::image::film::Film {
 fn progressive_world(spp: u32, transport: Transport) -> (World, Schedule, Entity) {
     let meshes = meshes();
     let mut rng = Rng(11);
-    let mut world = World::new();
-    let mut schedule = Schedule::default();
-    PrismPlugin::new()
-        .settings(RenderSettings {
-            width: 24,
-            height: 16,
-            spp,
-            max_depth: 2,
-            seed: 3,
-            transport,
-            ..Default::default()
-        })
-        .progressive(true)
-        .build(&mut world, &mut schedule);
+    let (mut world, schedule) = plugin_world(
+        PrismPlugin::new()
+            .settings(RenderSettings {
+                width: 24,
+                height: 16,
+                spp,
+                max_depth: 2,
+                seed: 3,
+                transport,
+                ..Default::default()
+            })
+            .progressive(true),
+    );
     let objects: Vec<Entity> = (0..8)
         .map(|_| spawn_object(&mut world, &mut rng, &meshes))
         .collect();
     for o in &objects {
         // Keep every transform valid and bounded.
-        let t = Transform::from_translation(rng.vec(6.0));
+        let t = Transform::from_translation(rng.vec(-6.0, 6.0));
         *world.get_mut::<Transform>(*o).unwrap() = t;
     }
     world.spawn((
@@ -543,8 +516,6 @@ fn quality_change_resets_the_scene() {
 /// scratch renders.
 #[test]
 fn area_lights_follow_moves_and_material_changes() {
-    let mut world = World::new();
-    let mut schedule = Schedule::default();
     let settings = RenderSettings {
         width: 20,
         height: 16,
@@ -554,9 +525,7 @@ fn area_lights_follow_moves_and_material_changes() {
         transport: Transport::Path,
         ..Default::default()
     };
-    PrismPlugin::new()
-        .settings(settings.clone())
-        .build(&mut world, &mut schedule);
+    let (mut world, mut schedule) = plugin_world(PrismPlugin::new().settings(settings.clone()));
     world.spawn((Transform::default(), Shape::Plane, Material::default()));
     let glow = |e: f32| Material {
         base_color: Color::ZERO,

@@ -6,14 +6,17 @@
 
 use glam::{Vec2, Vec3, Vec3A};
 use prism::core::math::Color;
-use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::scene::material::SurfaceSample;
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::{Frame, Renderer};
 use prism::transport::interaction::{Interaction, RayKind};
 use prism::transport::whitted::scatter;
+
+use crate::common::render::{config, render_desc, sized};
+use crate::common::scenes::lambert::{self, ALBEDO, lit_floor};
+use crate::common::scenes::load_toml;
 
 /// Every integrator the tests run; adding one is one line.
 const KINDS: &[IntegratorKind] = &[IntegratorKind::Recursive, IntegratorKind::Wavefront];
@@ -32,20 +35,8 @@ fn try_render(
     height: u32,
     kind: IntegratorKind,
 ) -> Result<Frame, prism::Error> {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.toml");
-    std::fs::write(&path, text).unwrap();
-    let desc = prism::io::load(&path, BuildQuality::Medium)?;
-    let config = RenderConfig {
-        settings: RenderSettings {
-            width,
-            height,
-            ..Default::default()
-        },
-        integrator: kind,
-        ..Default::default()
-    };
-    systems::render_scene_desc(desc, config, 0)
+    let desc = load_toml(text)?;
+    Renderer::with_scene(desc, config(sized(width, height), kind), 0)?.render()
 }
 
 fn film(frame: &Frame) -> &Film {
@@ -274,50 +265,15 @@ intensity = 5
     }
 }
 
-const ALBEDO: f32 = 0.5;
-const E_LUX: f32 = 2.0;
-const THETA_DEG: f32 = 30.0;
-
-/// `albedo / pi * E * cos(theta)` for a Lambertian surface.
-fn lambert() -> f32 {
-    ALBEDO / std::f32::consts::PI * E_LUX * THETA_DEG.to_radians().cos()
-}
-
-/// A camera looking straight down at the plane y = 0, lit by a directional
-/// light at 30 degrees; `objects` are added.
-fn lit_floor(objects: &str) -> String {
-    let t = THETA_DEG.to_radians();
-    format!(
-        r#"
-[camera]
-look_from = [0, 3, 0]
-look_at = [0, 0, 0]
-up = [0, 0, -1]
-vfov = 30
-
-[[lights]]
-type = "directional"
-direction = [{}, {}, 0]
-illuminance = {E_LUX}
-{objects}
-"#,
-        t.sin(),
-        -t.cos()
-    )
-}
-
 /// Every pixel has the Lambertian radiance within 0.5 % (the tolerance of
-/// tests/render.rs; shadow acne would make pixels black).
+/// the analytic tests; shadow acne would make pixels black).
 fn assert_all_lit(film: &Film, what: &str) {
-    let expect = lambert();
-    for (i, p) in film.pixels.iter().enumerate() {
-        for v in p.to_array() {
-            assert!(
-                (v - expect).abs() <= 0.005 * expect,
-                "{what}: pixel {i} = {v}, expected {expect} (acne?)"
-            );
-        }
-    }
+    lambert::assert_lit(
+        film,
+        0..film.width,
+        0..film.height,
+        &format!("{what} (acne?)"),
+    );
 }
 
 #[test]
@@ -374,9 +330,6 @@ material = {{ color = {ALBEDO} }}
     // shading normal falls back to the geometric one.
     use prism::geometry::mesh::{Mesh, MeshData, NormalMode};
     use prism::io::desc::{Geometry, ObjectDesc};
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("s.toml");
-    std::fs::write(&path, lit_floor("")).unwrap();
     let positions = vec![
         Vec3::new(-3.0, 0.0, -3.0),
         Vec3::new(-3.0, 0.0, 3.0),
@@ -384,7 +337,7 @@ material = {{ color = {ALBEDO} }}
         Vec3::new(3.0, 0.0, -3.0),
     ];
     for &kind in KINDS {
-        let mut desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
+        let mut desc = load_toml(&lit_floor("")).unwrap();
         desc.objects.push(ObjectDesc {
             name: None,
             transform: Default::default(),
@@ -407,16 +360,7 @@ material = {{ color = {ALBEDO} }}
                 ..Default::default()
             },
         });
-        let config = RenderConfig {
-            settings: RenderSettings {
-                width: W,
-                height: H,
-                ..Default::default()
-            },
-            integrator: kind,
-            ..Default::default()
-        };
-        let f = systems::render_scene_desc(desc, config, 0).unwrap();
+        let f = render_desc(desc, config(sized(W, H), kind));
         assert_eq!(f.counters.nonfinite_samples, 0);
         assert_all_lit(film(&f), "zero-length normals");
     }

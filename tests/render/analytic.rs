@@ -2,42 +2,30 @@
 //! geometry and radiometry say the image must be.
 
 use std::f32::consts::PI;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use glam::{Quat, Vec2, Vec3, Vec3A};
 use prism::core::settings::RenderSettings;
-use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
+use prism::integrators::IntegratorKind;
 use prism::scene::camera::{Camera, CameraRays};
-use prism::systems::{self, RenderConfig};
 
-fn assets() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
-
-/// Writes `text` to `dir/name` and returns the path.
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
+use crate::common::cli::{assert_success, prism};
+use crate::common::images::film_bits;
+use crate::common::render::{config, render_desc, sized};
+use crate::common::scenes::lambert::{self, ALBEDO, E_LUX, THETA_DEG};
+use crate::common::scenes::{self, glass_ball, write};
+use crate::common::{assets, render};
 
 fn render_file(
     path: &Path,
     width: u32,
     height: u32,
 ) -> (Film, prism::integrators::counters::RenderCounters) {
-    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
-    let config = RenderConfig {
-        settings: RenderSettings {
-            width,
-            height,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let frame = systems::render_scene_desc(desc, config, 0).unwrap();
+    let frame = render::render_file(
+        path,
+        config(sized(width, height), IntegratorKind::default()),
+    );
     (frame.film.unwrap(), frame.counters)
 }
 
@@ -47,7 +35,7 @@ fn render_exr_with_binary(scene: &Path, dir: &Path, width: u32, height: u32) -> 
         "{}.exr",
         scene.file_stem().unwrap().to_str().unwrap()
     ));
-    let status = Command::new(env!("CARGO_BIN_EXE_prism"))
+    let status = prism()
         .arg("render")
         .arg(scene)
         .arg("-o")
@@ -61,69 +49,27 @@ fn render_exr_with_binary(scene: &Path, dir: &Path, width: u32, height: u32) -> 
         ])
         .output()
         .unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
+    assert_success(&status);
     prism::image::output::read_image(&out).unwrap()
-}
-
-const ALBEDO: f32 = 0.5;
-const E_LUX: f32 = 2.0;
-const THETA_DEG: f32 = 30.0;
-
-/// Radiance of a Lambertian surface under a directional light:
-/// `albedo / pi * E * cos(theta)`.
-fn lambert_expected() -> f32 {
-    ALBEDO / PI * E_LUX * THETA_DEG.to_radians().cos()
 }
 
 /// Checks that the central quarter of the image (all on the quad) has the
 /// analytic radiance within 0.5 %.
 fn assert_lambert_quad(film: &Film) {
-    let expect = lambert_expected();
     let (w, h) = (film.width, film.height);
-    let mut checked = 0;
-    for y in h / 4..3 * h / 4 {
-        for x in w / 4..3 * w / 4 {
-            let c = film.get(x, y);
-            for v in [c.x, c.y, c.z] {
-                assert!(
-                    (v - expect).abs() <= 0.005 * expect,
-                    "pixel ({x},{y}) = {v}, expected {expect}"
-                );
-            }
-            checked += 1;
-        }
-    }
-    assert!(checked > 0);
+    lambert::assert_lit(film, w / 4..3 * w / 4, h / 4..3 * h / 4, "the quad");
 }
 
 #[test]
 fn lambertian_quad_from_the_project_format() {
     let dir = tempfile::tempdir().unwrap();
-    let t = THETA_DEG.to_radians();
-    let scene = format!(
+    let scene = lambert::lit_floor(&format!(
         r#"
-[camera]
-look_from = [0, 3, 0]
-look_at = [0, 0, 0]
-up = [0, 0, -1]
-vfov = 30
-
 [[objects]]
 shape = {{ type = "polygon", vertices = [[-2, 0, -2], [-2, 0, 2], [2, 0, 2], [2, 0, -2]] }}
 material = {{ color = {ALBEDO}, diffuse = 1.0 }}
-
-[[lights]]
-type = "directional"
-direction = [{}, {}, 0]
-illuminance = {E_LUX}
-"#,
-        t.sin(),
-        -t.cos()
-    );
+"#
+    ));
     let path = write(dir.path(), "quad.toml", &scene);
     let film = render_exr_with_binary(&path, dir.path(), 32, 32);
     assert_lambert_quad(&film);
@@ -226,22 +172,13 @@ fn glass_sphere_shows_the_pattern_behind_it_inverted() {
     // ball (n = 1.5, R = 1, focal length 1.5 R from its centre) images it
     // inverted: through the ball, above the centre shows blue.
     let dir = tempfile::tempdir().unwrap();
-    let scene = r#"
-[camera]
-look_from = [0, 0, 10]
-look_at = [0, 0, 0]
-vfov = 20
-[[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.5 }
-[[objects]]
-shape = { type = "polygon", vertices = [[-8, 0, -4], [8, 0, -4], [8, 8, -4], [-8, 8, -4]] }
-material = { color = 0.0, emission = [1, 0, 0] }
-[[objects]]
+    let scene = glass_ball(
+        r#"[[objects]]
 shape = { type = "polygon", vertices = [[-8, -8, -4], [8, -8, -4], [8, 0, -4], [-8, 0, -4]] }
 material = { color = 0.0, emission = [0, 0, 1] }
-"#;
-    let path = write(dir.path(), "lens.toml", scene);
+"#,
+    );
+    let path = write(dir.path(), "lens.toml", &scene);
     let (w, h) = (41, 41);
     let (film, counters) = render_file(&path, w, h);
     assert!(counters.rays.refraction > 0);
@@ -381,34 +318,22 @@ fn same_seed_same_image_whatever_the_thread_count() {
             .build()
             .unwrap();
         pool.install(|| {
-            let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
-            let config = RenderConfig {
-                settings: RenderSettings {
-                    width: 40,
-                    height: 30,
-                    spp: 3,
-                    seed: 11,
-                    ..Default::default()
-                },
+            let settings = RenderSettings {
+                width: 40,
+                height: 30,
+                spp: 3,
+                seed: 11,
                 ..Default::default()
             };
-            systems::render_scene_desc(desc, config, 0)
-                .unwrap()
-                .film
-                .unwrap()
+            let config = config(settings, IntegratorKind::default());
+            render_desc(scenes::load(&path), config).film.unwrap()
         })
     };
     let a = render_with(1);
     let b = render_with(2);
     let c = render_with(2);
-    let bits = |f: &Film| {
-        f.pixels
-            .iter()
-            .flat_map(|p| p.to_array().map(f32::to_bits))
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(bits(&a), bits(&b));
-    assert_eq!(bits(&b), bits(&c));
+    assert_eq!(film_bits(&a), film_bits(&b));
+    assert_eq!(film_bits(&b), film_bits(&c));
 }
 
 #[test]

@@ -3,38 +3,27 @@
 //! a uniform environment, and agreement with the Whitted tracer and
 //! between the two integrators.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{Vec2, Vec3, Vec3A};
 use prism::core::settings::{RenderSettings, Transport};
-use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::scene::camera::{Camera, CameraRays};
-use prism::systems::{self, RenderConfig};
 
-fn assets() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
+use crate::common::images::assert_same_image;
+use crate::common::render::{config, render_toml};
+use crate::common::{assets, render};
 
 /// Renders scene text (TOML) with `settings`; returns the film.
 fn render_text(toml: &str, settings: &RenderSettings, kind: IntegratorKind) -> Film {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.toml");
-    std::fs::write(&path, toml).unwrap();
-    render_file(&path, settings, kind)
+    render_toml(toml, config(settings.clone(), kind))
+        .film
+        .unwrap()
 }
 
 fn render_file(path: &Path, settings: &RenderSettings, kind: IntegratorKind) -> Film {
-    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
-    let config = RenderConfig {
-        settings: settings.clone(),
-        integrator: kind,
-        background: desc.background,
-        ..Default::default()
-    };
-    systems::render_scene_desc(desc, config, 0)
-        .unwrap()
+    render::render_file(path, config(settings.clone(), kind))
         .film
         .unwrap()
 }
@@ -352,15 +341,11 @@ fn path_traced_images_agree_between_integrators_and_thread_counts() {
         let (_, _, reference) = &films[0];
         assert!(reference.pixels.iter().any(|p| p.max_element() > 0.0));
         for (threads, kind, film) in &films {
-            for (i, (p, q)) in film.pixels.iter().zip(&reference.pixels).enumerate() {
-                for (x, y) in p.to_array().into_iter().zip(q.to_array()) {
-                    let diff = (x - y).abs();
-                    assert!(
-                        diff <= 1e-6 || diff <= 1e-4 * x.abs().max(y.abs()),
-                        "{scene}, {kind:?} on {threads} threads: pixel {i}: {p} vs {q}"
-                    );
-                }
-            }
+            assert_same_image(
+                film,
+                reference,
+                &format!("{scene}, {kind:?} on {threads} threads"),
+            );
         }
         // Same integrator, other thread count: bit for bit.
         assert!(films[0].2.pixels == films[2].2.pixels, "{scene} recursive");

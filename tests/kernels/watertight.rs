@@ -28,6 +28,8 @@ use glam::{DVec3, Quat, Vec3, Vec3A};
 use prism::core::math::Ray;
 use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
 
+use crate::common::rng::{Random, SplitMix64 as Rng};
+
 /// Each edge (sorted vertex pair) with the triangles that share it.
 type EdgeTriangles = Vec<([u32; 2], Vec<usize>)>;
 
@@ -45,32 +47,6 @@ const ENTER_DEPTH: f64 = 32.0;
 /// point may move farther near a grazing triangle, by this over the
 /// cosine between ray and normal.
 const ON_SURFACE: f64 = 4.0;
-
-/// SplitMix64: a small deterministic generator for test inputs.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, a: f32, b: f32) -> f32 {
-        a + (b - a) * self.f()
-    }
-    fn dir(&mut self) -> Vec3 {
-        let z = self.range(-1.0, 1.0);
-        let phi = self.range(0.0, std::f32::consts::TAU);
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-}
 
 fn d64(v: impl Into<Vec3>) -> DVec3 {
     v.into().as_dvec3()
@@ -333,7 +309,7 @@ fn shoot_scaled(
     for (a, b) in &targets {
         for _ in 0..per_target {
             // A point on the edge (exactly the vertex when a == b).
-            let s = rng.f();
+            let s = rng.f32();
             let target = if a == b { *a } else { *a + (*b - *a) * s };
             // Origins from just outside to far away.
             let dist = match rng.next_u64() % 4 {
@@ -708,7 +684,7 @@ fn packet_traversal_has_no_leaks() {
             .map(|_| {
                 let a = solid.positions[rng.next_u64() as usize % 8];
                 let b = solid.positions[rng.next_u64() as usize % 8];
-                let target = a + (b - a) * rng.f();
+                let target = a + (b - a) * rng.f32();
                 let o = target + rng.dir() * 10f32.powf(rng.range(0.0, 3.0));
                 Ray::new(o.into(), (target - o).into())
             })
@@ -744,7 +720,7 @@ fn stream_traversal_has_no_leaks() {
         for _ in 0..1000 {
             let a = solid.positions[rng.next_u64() as usize % 8];
             let b = solid.positions[rng.next_u64() as usize % 8];
-            let target = a + (b - a) * rng.f();
+            let target = a + (b - a) * rng.f32();
             let o = target + rng.dir() * 10f32.powf(rng.range(0.0, 3.0));
             stream.push(Ray::new(o.into(), (target - o).into()), 0.0, f32::INFINITY);
         }

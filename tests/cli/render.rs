@@ -2,35 +2,19 @@
 //! message and a non-zero exit, never a panic and never an output file.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn prism() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_prism"))
-}
+use crate::common::assets;
+use crate::common::cli::{assert_failed_without_panic, assert_success, prism};
 
 fn corpus() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")
 }
 
-fn assets() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
-
 /// Asserts a clean failure: non-zero status that is not a panic (101),
 /// an `error:` message, and no output file.
 fn assert_clean_failure(out: &Output, output_file: &Path, must_mention: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let code = out.status.code();
-    assert!(
-        !out.status.success(),
-        "expected failure, got success; stderr: {stderr}"
-    );
-    assert_ne!(code, Some(101), "prism panicked: {stderr}");
-    assert!(code.is_some(), "killed by a signal: {stderr}");
-    assert!(
-        !stderr.contains("panicked"),
-        "panic message in stderr: {stderr}"
-    );
+    let stderr = assert_failed_without_panic(out);
     assert!(stderr.contains("error"), "no error message: {stderr}");
     for m in must_mention {
         assert!(
@@ -219,11 +203,7 @@ fn stats_file_reports_the_render() {
             "12",
         ],
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     for key in [
@@ -266,11 +246,7 @@ fn bench_compares_both_integrators_as_json() {
         .arg(assets().join("whitted.toml"))
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let scene = &json[0];
     let ints = scene["integrators"].as_array().unwrap();

@@ -2,23 +2,18 @@
 //! `prism compare` and `prism tradeoff` commands run as a user would.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use glam::Vec3;
 use prism::core::settings::{RenderSettings, Transport};
-use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
 use prism::image::metrics;
 use prism::image::output::PngOptions;
-use prism::systems::{self, RenderConfig};
+use prism::integrators::IntegratorKind;
 
-fn prism() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_prism"))
-}
-
-fn assets() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
+use crate::common::cli::{assert_failed_without_panic, assert_success, prism};
+use crate::common::render::{config, render_file};
+use crate::common::{assets, scenes};
 
 /// The Cornell box with its panel dimmed tenfold and a point light added,
 /// so that both transports light the room: Whitted from the point light
@@ -35,19 +30,11 @@ fn lit_cornell(dir: &Path) -> PathBuf {
     let scene = format!(
         "{dimmed}\n[[lights]]\ntype = \"point\"\nposition = [2.0, 4.5, 1.5]\nintensity = 30.0\n"
     );
-    let path = dir.join("lit_cornell.toml");
-    std::fs::write(&path, scene).unwrap();
-    path
+    scenes::write(dir, "lit_cornell.toml", &scene)
 }
 
 fn render(scene: &Path, settings: RenderSettings) -> Film {
-    let desc = prism::io::load(scene, BuildQuality::Medium).unwrap();
-    let config = RenderConfig {
-        settings,
-        ..Default::default()
-    };
-    systems::render_scene_desc(desc, config, 0)
-        .unwrap()
+    render_file(scene, config(settings, IntegratorKind::default()))
         .film
         .unwrap()
 }
@@ -106,11 +93,7 @@ fn error_falls_as_spp_rises() {
 /// Asserts a clean failure: non-zero status that is not a panic, an
 /// `error:` line mentioning `words`.
 fn assert_clean_failure(out: &Output, words: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure: {stderr}");
-    assert_ne!(out.status.code(), Some(101), "panicked: {stderr}");
-    assert!(out.status.code().is_some(), "killed by a signal: {stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
+    let stderr = assert_failed_without_panic(out);
     assert!(stderr.contains("error:"), "no error message: {stderr}");
     for w in words {
         assert!(stderr.contains(w), "message should mention {w:?}: {stderr}");
@@ -151,11 +134,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
         .arg("--json")
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // RMSE of a constant offset is the offset; relMSE by hand:
     // mean over i of 0.25 / ((0.25 i)^2 + 0.01).
@@ -255,11 +234,7 @@ fn tradeoff_writes_the_csv_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("run");
     let out = tradeoff(&out_dir, &[]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     assert_eq!(
         files_in(&out_dir),
         [
@@ -323,11 +298,7 @@ fn tradeoff_writes_the_csv_and_plots() {
     let again = dir.path().join("again");
     let reference_arg = out_dir.join("reference.exr");
     let out = tradeoff(&again, &["--reference", reference_arg.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     assert_eq!(
         files_in(&again),
         ["tradeoff.csv", "tradeoff.png", "tradeoff.svg"]

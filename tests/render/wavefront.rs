@@ -4,19 +4,18 @@ use std::path::{Path, PathBuf};
 
 use bevy_ecs::prelude::*;
 use prism::core::settings::RenderSettings;
-use prism::geometry::mesh::BuildQuality;
-use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::scene::material::MaterialClass;
 use prism::systems::wavefront::{
     self, BatchSize, Bounce, CurrentRays, EscapedRays, NextRays, ShadowRays, StartBatch,
     WavefrontFrame, hit_queue, hit_queue_mut,
 };
-use prism::systems::{self, Frame, RenderConfig};
+use prism::systems::{Frame, RenderConfig, Renderer};
 
-fn assets() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
+use crate::common::assets;
+use crate::common::images::{assert_same_image, film_bits};
+use crate::common::render::{config, renderer};
+use crate::common::scenes::{self, glass_ball, load_toml, sphere_on_disk};
 
 fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
     RenderSettings {
@@ -29,39 +28,14 @@ fn settings(width: u32, height: u32, spp: u32) -> RenderSettings {
 }
 
 fn render(path: &Path, kind: IntegratorKind, s: &RenderSettings, batch: usize) -> Frame {
-    let desc = prism::io::load(path, BuildQuality::Medium).unwrap();
-    let mut world = World::new();
-    let mut schedule = systems::setup(&mut world);
-    let background = desc.background;
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(BatchSize(batch));
-    world.insert_resource(RenderConfig {
-        settings: s.clone(),
-        integrator: kind,
-        camera: Some(cameras[0]),
-        background,
-        ..Default::default()
-    });
-    schedule.run(&mut world);
-    world.remove_resource::<Frame>().unwrap()
-}
-
-/// Every pixel within 1e-4 relative or 1e-6 absolute.
-fn assert_same_image(a: &Film, b: &Film, what: &str) {
-    assert_eq!((a.width, a.height), (b.width, b.height));
-    for (i, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
-        for (x, y) in p.to_array().into_iter().zip(q.to_array()) {
-            let diff = (x - y).abs();
-            assert!(
-                diff <= 1e-6 || diff <= 1e-4 * x.abs().max(y.abs()),
-                "{what}: pixel {i} differs: {p} vs {q}"
-            );
-        }
-    }
+    renderer(scenes::load(path), config(s.clone(), kind))
+        .insert_resource(BatchSize(batch))
+        .render()
+        .unwrap()
 }
 
 /// Every scene in assets/ (and the sample scenes when present).
-fn scenes() -> Vec<PathBuf> {
+fn every_scene() -> Vec<PathBuf> {
     let mut v = Vec::new();
     let mut stack = vec![assets()];
     while let Some(dir) = stack.pop() {
@@ -96,10 +70,10 @@ fn scenes() -> Vec<PathBuf> {
 #[test]
 fn both_integrators_give_the_same_image_on_every_scene() {
     let s = settings(48, 36, 2);
-    let scenes = scenes();
+    let scenes = every_scene();
     assert!(scenes.len() >= 3);
     for path in scenes {
-        let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
+        let desc = scenes::load(&path);
         if desc.cameras.is_empty() {
             continue;
         }
@@ -118,23 +92,13 @@ fn both_integrators_give_the_same_image_on_every_scene() {
 
 #[test]
 fn test_scenes_match_too() {
-    // The analytic scenes of tests/render.rs, through both integrators.
+    // The analytic scenes of tests/render/analytic.rs, through both integrators.
     let dir = tempfile::tempdir().unwrap();
-    let lens = dir.path().join("lens.toml");
-    std::fs::write(
-        &lens,
-        r#"
-[camera]
-look_from = [0, 0, 10]
-look_at = [0, 0, 0]
-vfov = 20
-[[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.5 }
-[[objects]]
-shape = { type = "polygon", vertices = [[-8, 0, -4], [8, 0, -4], [8, 8, -4], [-8, 8, -4]] }
-material = { color = 0.0, emission = [1, 0, 0] }
-[[objects]]
+    let lens = scenes::write(
+        dir.path(),
+        "lens.toml",
+        &glass_ball(
+            r#"[[objects]]
 shape = { type = "plane" }
 material = { color = 0.5, mirror = 0.3 }
 translate = [0, -1.5, 0]
@@ -144,8 +108,8 @@ position = [0, 5, 3]
 direction = [0, -1, -0.5]
 intensity = 40
 "#,
-    )
-    .unwrap();
+        ),
+    );
     let s = settings(40, 40, 1);
     let rec = render(&lens, IntegratorKind::Recursive, &s, 97);
     let wav = render(&lens, IntegratorKind::Wavefront, &s, 97);
@@ -166,15 +130,7 @@ fn each_integrator_is_bit_identical_whatever_the_thread_count() {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| {
-                render(&path, kind, &s, 700)
-                    .film
-                    .unwrap()
-                    .pixels
-                    .iter()
-                    .flat_map(|p| p.to_array().map(f32::to_bits))
-                    .collect::<Vec<_>>()
-            })
+            pool.install(|| film_bits(&render(&path, kind, &s, 700).film.unwrap()))
         };
         let one = bits(1);
         assert_eq!(one, bits(2), "{kind:?}: 1 vs 2 threads");
@@ -184,29 +140,18 @@ fn each_integrator_is_bit_identical_whatever_the_thread_count() {
 }
 
 /// A world ready to step through the wavefront stages by hand.
-fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::TempDir) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("s.toml");
-    std::fs::write(&path, scene_toml).unwrap();
-    let desc = prism::io::load(&path, BuildQuality::Medium).unwrap();
-    let mut world = World::new();
-    let mut schedule = systems::setup(&mut world);
-    let cameras = systems::spawn_scene(&mut world, desc);
-    world.insert_resource(RenderConfig {
-        settings: s,
-        camera: Some(cameras[0]),
-        ..Default::default()
-    });
+fn stepping_world(scene_toml: &str, s: RenderSettings) -> Renderer {
+    let mut r = renderer(
+        load_toml(scene_toml).unwrap(),
+        config(s, IntegratorKind::default()),
+    );
     // Run one (recursive) frame so the scene is extracted and built.
-    schedule.run(&mut world);
-    let scene = world
-        .resource::<systems::SceneAccel>()
-        .scene
-        .clone()
-        .unwrap();
+    r.run();
+    let scene = r.scene().unwrap();
+    let world = r.world_mut();
     let camera = world
         .query::<&prism::scene::camera::Camera>()
-        .single(&world)
+        .single(world)
         .unwrap()
         .clone();
     let config = world.resource::<RenderConfig>().settings.clone();
@@ -222,39 +167,28 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> (World, tempfile::Temp
         features,
         shadows,
     });
-    (world, dir)
+    r
 }
 
-const DIFFUSE_SCENE: &str = r#"
-[camera]
-look_from = [0, 1, 6]
-look_at = [0, 0.5, 0]
-[[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { color = 0.7, specular = 0.2, shininess = 30 }
-[[objects]]
-shape = { type = "disk", radius = 3.0 }
-material = { color = 0.5 }
-[[lights]]
-type = "point"
-position = [2, 4, 3]
-intensity = 30
-"#;
+fn diffuse_scene() -> String {
+    sphere_on_disk("{ color = 0.7, specular = 0.2, shininess = 30 }", "")
+}
 
 #[test]
 fn stages_drain_their_queues_and_misses_are_escaped() {
-    let (mut world, _dir) = stepping_world(DIFFUSE_SCENE, settings(32, 24, 1));
+    let mut renderer = stepping_world(&diffuse_scene(), settings(32, 24, 1));
+    let world = renderer.world_mut();
     world.run_schedule(StartBatch);
     let n = world.resource::<CurrentRays>().0.len();
     assert_eq!(n, 32 * 24);
     // Run the closest-hit stage alone to look at its output.
     let mut only_intersect = Schedule::default();
     only_intersect.add_systems(wavefront::intersect_closest);
-    only_intersect.run(&mut world);
+    only_intersect.run(world);
     let escaped = world.resource::<EscapedRays>().0.len();
     let hits: usize = MaterialClass::ALL
         .iter()
-        .map(|&c| hit_queue(&world, c).len())
+        .map(|&c| hit_queue(world, c).len())
         .sum();
     assert_eq!(escaped + hits, n, "every ray is routed exactly once");
     assert!(escaped > 0 && hits > 0);
@@ -265,20 +199,20 @@ fn stages_drain_their_queues_and_misses_are_escaped() {
         .filter(|&i| scene.intersect(&rays.ray(i), 0.0, f32::INFINITY).is_none())
         .count();
     assert_eq!(misses, escaped);
-    let diffuse = hit_queue(&world, MaterialClass::Diffuse).len();
+    let diffuse = hit_queue(world, MaterialClass::Diffuse).len();
     assert_eq!(diffuse, hits, "both materials are diffuse");
 
     // A whole bounce drains every queue it consumes.
     world.resource_mut::<EscapedRays>().0.clear();
     for class in MaterialClass::ALL {
-        hit_queue_mut(&mut world, class).clear();
+        hit_queue_mut(world, class).clear();
     }
     world.run_schedule(Bounce);
     assert!(world.resource::<EscapedRays>().0.is_empty());
     assert!(
         MaterialClass::ALL
             .iter()
-            .all(|&c| hit_queue(&world, c).is_empty())
+            .all(|&c| hit_queue(world, c).is_empty())
     );
     assert!(world.resource::<ShadowRays>().0.is_empty());
     assert!(world.resource::<NextRays>().0.is_empty());
@@ -288,7 +222,7 @@ fn stages_drain_their_queues_and_misses_are_escaped() {
 
 #[test]
 fn a_scene_without_glass_never_pushes_a_refraction_ray() {
-    let mirror_scene = DIFFUSE_SCENE.replace(
+    let mirror_scene = diffuse_scene().replace(
         "material = { color = 0.7, specular = 0.2, shininess = 30 }",
         "material = { color = 0.0, diffuse = 0.0, mirror = 0.9 }",
     );
@@ -301,7 +235,7 @@ fn a_scene_without_glass_never_pushes_a_refraction_ray() {
     assert!(frame.counters.rays.reflection > 0);
 
     // And with glass, it does.
-    let glass = DIFFUSE_SCENE.replace(
+    let glass = diffuse_scene().replace(
         "material = { color = 0.7, specular = 0.2, shininess = 30 }",
         "material = { color = 1.0, diffuse = 0.0, transmission = 1.0 }",
     );

@@ -1,0 +1,15 @@
+//! Command-line tests: the `prism` binary run as a user would. One test
+//! binary (it links the whole crate once):
+//!
+//! * `cargo test --test cli` runs them all;
+//! * `cargo test --test cli render::` — `prism render` and `prism bench`:
+//!   bad input gives a clear message and a non-zero exit, never a panic
+//!   or an output file; help, statistics and the benchmark's JSON;
+//! * `cargo test --test cli tools::` — the measuring tools: the error
+//!   trend against samples per pixel, `prism compare` and `prism tradeoff`.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod render;
+mod tools;

@@ -1,0 +1,18 @@
+//! Kernel tests: intersection, BVH and offset kernels against brute force
+//! and f64 references, without an ECS world. One test binary (it links
+//! the whole crate once):
+//!
+//! * `cargo test --test kernels` runs them all;
+//! * `cargo test --test kernels bvh::` — BVH traversal (top level, mesh,
+//!   packets, streams) against brute force;
+//! * `cargo test --test kernels watertight::` — no leaks at shared edges
+//!   and vertices of closed meshes;
+//! * `cargo test --test kernels properties::` — property tests of the f32
+//!   shape kernels against f64 and of `offset_origin`.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod bvh;
+mod properties;
+mod watertight;

@@ -1,0 +1,26 @@
+//! Rendering tests: scenes rendered end to end through the ECS world and
+//! both integrators, checked against analytic answers, against each other
+//! and against scenes built from scratch. One test binary (it links the
+//! whole crate once):
+//!
+//! * `cargo test --test render` runs them all;
+//! * `cargo test --test render analytic::` — small scenes against what
+//!   geometry and radiometry say (Lambertian quads from TOML and glTF
+//!   through the `prism` binary, mirror, lens, shadows, determinism);
+//! * `cargo test --test render path::` — path transport against analytic
+//!   answers (white furnace, area lights) and the Whitted tracer;
+//! * `cargo test --test render robustness::` — numerical extremes (IOR,
+//!   total internal reflection, coincident surfaces, scale invariance);
+//! * `cargo test --test render wavefront::` — the wavefront integrator
+//!   against the recursive one, and its queues;
+//! * `cargo test --test render scene_updates::` — incremental scene updates
+//!   against scenes built from scratch, progressive accumulation.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod analytic;
+mod path;
+mod robustness;
+mod scene_updates;
+mod wavefront;
