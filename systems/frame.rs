@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 
-use super::sync::SceneUpdateReport;
+use crate::accel::tlas::{TlasCounters, TlasUpdate};
 use crate::core::math::Color;
 use crate::core::settings::RenderSettings;
 use crate::geometry::mesh::BuildQuality;
@@ -109,4 +109,44 @@ pub struct Frame {
     /// Samples per pixel in the image (more than `spp` when progressive
     /// frames accumulated).
     pub samples: u32,
+}
+
+/// What the last frame's scene update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SceneUpdateReport {
+    /// Objects removed from the scene.
+    pub removed: u32,
+    /// Objects added to the scene.
+    pub added: u32,
+    /// Objects whose transform changed.
+    pub moved: u32,
+    /// Objects whose shape or mesh changed.
+    pub regeometry: u32,
+    /// Objects whose material changed.
+    pub rematerial: u32,
+    /// The lights were gathered again.
+    pub lights_changed: bool,
+    /// The scene was created afresh (first frame, BVH quality change, or
+    /// the previous scene still shared elsewhere).
+    pub reset: bool,
+    /// What happened to the top-level BVH.
+    pub tlas: TlasUpdate,
+    /// Cumulative top-level work since the scene was created.
+    pub tlas_counters: TlasCounters,
+    /// Mesh BVHs built by the process so far
+    /// ([`crate::geometry::mesh::mesh_bvh_builds`]); scene updates never add to it.
+    pub mesh_bvh_builds: u64,
+    /// Seconds spent applying ECS changes to the scene.
+    pub sync_seconds: f64,
+    /// Seconds spent updating the top-level BVH.
+    pub accel_seconds: f64,
+}
+
+impl SceneUpdateReport {
+    /// True when anything in the scene changed this frame.
+    pub fn changed(&self) -> bool {
+        self.reset
+            || self.removed + self.added + self.moved + self.regeometry + self.rematerial > 0
+            || self.lights_changed
+    }
 }

@@ -35,7 +35,6 @@ use bevy_ecs::prelude::*;
 
 use super::components::MeshInstance;
 use super::{ExtractedScene, Frame, RenderConfig, SceneAccel};
-use crate::accel::tlas::{TlasCounters, TlasUpdate};
 use crate::geometry::mesh::BuildQuality;
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
@@ -43,45 +42,7 @@ use crate::scene::light::{Light, WorldLight};
 use crate::scene::material::Material;
 use crate::scene::{Instance, InstanceGeometry, RenderScene};
 
-/// What the last frame's scene update did.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct SceneUpdateReport {
-    /// Objects removed from the scene.
-    pub removed: u32,
-    /// Objects added to the scene.
-    pub added: u32,
-    /// Objects whose transform changed.
-    pub moved: u32,
-    /// Objects whose shape or mesh changed.
-    pub regeometry: u32,
-    /// Objects whose material changed.
-    pub rematerial: u32,
-    /// The lights were gathered again.
-    pub lights_changed: bool,
-    /// The scene was created afresh (first frame, BVH quality change, or
-    /// the previous scene still shared elsewhere).
-    pub reset: bool,
-    /// What happened to the top-level BVH.
-    pub tlas: TlasUpdate,
-    /// Cumulative top-level work since the scene was created.
-    pub tlas_counters: TlasCounters,
-    /// Mesh BVHs built by the process so far
-    /// ([`crate::geometry::mesh::mesh_bvh_builds`]); scene updates never add to it.
-    pub mesh_bvh_builds: u64,
-    /// Seconds spent applying ECS changes to the scene.
-    pub sync_seconds: f64,
-    /// Seconds spent updating the top-level BVH.
-    pub accel_seconds: f64,
-}
-
-impl SceneUpdateReport {
-    /// True when anything in the scene changed this frame.
-    pub fn changed(&self) -> bool {
-        self.reset
-            || self.removed + self.added + self.moved + self.regeometry + self.rematerial > 0
-            || self.lights_changed
-    }
-}
+pub use super::frame::SceneUpdateReport;
 
 /// The link between entities and the persistent scene.
 #[derive(Resource, Default)]

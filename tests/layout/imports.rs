@@ -664,13 +664,30 @@ impl Analysis {
         out
     }
 
-    /// Every set of files that import each other in a circle.
+    /// True when `to` is a module that encloses `from` (its parent or
+    /// further up): a submodule naming its own parent's items is inside
+    /// that module's namespace, not a dependency between modules.
+    fn is_enclosing(&self, from: &str, to: &str) -> bool {
+        match (self.modules.get(from), self.modules.get(to)) {
+            (Some(f), Some(t)) => t.len() < f.len() && f.starts_with(t),
+            _ => false,
+        }
+    }
+
+    /// Every set of files that import each other in a circle. A file's
+    /// imports of the modules that enclose it (a folder's `mod.rs` and
+    /// its ancestors) are not edges: a module folder's files share its
+    /// private items by Rust's design, and the parent naming its children
+    /// is how it exposes them. Cycles among siblings, cousins or unrelated
+    /// files are reported.
     pub fn cycles(&self) -> Vec<Cycle> {
         let nodes: Vec<&str> = self.modules.keys().map(String::as_str).collect();
         let index = |f: &str| nodes.iter().position(|&n| n == f).unwrap();
         let mut adj = vec![BTreeSet::new(); nodes.len()];
         for i in &self.imports {
-            adj[index(&i.from)].insert(index(&i.to));
+            if !self.is_enclosing(&i.from, &i.to) {
+                adj[index(&i.from)].insert(index(&i.to));
+            }
         }
         let mut out = Vec::new();
         for scc in strongly_connected(&adj) {
@@ -681,7 +698,11 @@ impl Analysis {
             let inside: Vec<String> = self
                 .imports
                 .iter()
-                .filter(|i| files.contains(&i.from) && files.contains(&i.to))
+                .filter(|i| {
+                    files.contains(&i.from)
+                        && files.contains(&i.to)
+                        && !self.is_enclosing(&i.from, &i.to)
+                })
                 .map(|i| format!("    {}:{} `{}` -> {}", i.from, i.line, i.written, i.to))
                 .collect();
             out.push(Cycle {
@@ -946,6 +967,39 @@ fn f<'a>(x: &'a str) -> &'a str { x }
             ]
         );
         assert!(a.cycles().is_empty());
+    }
+
+    #[test]
+    fn a_folder_and_its_own_files_may_name_each_other_but_siblings_may_not() {
+        let t = tree(&[
+            ("src/lib.rs", ""),
+            ("src/geometry/mod.rs", "pub mod shapes;\n"),
+            (
+                "src/geometry/shapes/mod.rs",
+                "mod planar;\nmod roots;\nuse planar::disk;\npub struct Hit;\n",
+            ),
+            (
+                "src/geometry/shapes/planar.rs",
+                "use super::Hit;\nuse super::roots::solve;\npub fn disk() {}\n",
+            ),
+            ("src/geometry/shapes/roots.rs", "pub fn solve() {}\n"),
+        ]);
+        assert!(analyse(&t).cycles().is_empty());
+        // roots naming planar back closes a cycle between siblings.
+        let mut t = t;
+        t.insert(
+            "src/geometry/shapes/roots.rs".into(),
+            "pub fn solve() { super::planar::disk() }\n".into(),
+        );
+        let c = analyse(&t).cycles();
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert_eq!(
+            c[0].files,
+            [
+                "src/geometry/shapes/planar.rs",
+                "src/geometry/shapes/roots.rs"
+            ]
+        );
     }
 
     #[test]
