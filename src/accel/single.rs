@@ -13,7 +13,7 @@ use crate::core::math::Ray;
 /// the heap past its capacity. obvhs's own stack overwrites its last entry
 /// when full (its depth check runs in debug builds only), which would
 /// silently lose subtrees of a tree deeper than 32 levels; such trees
-/// come from degenerate input (see `tests/bvh.rs`). A `Vec` allocates
+/// come from degenerate input (see the deep-tree test in `geometry::mesh`). A `Vec` allocates
 /// nothing until it is pushed to, so shallow trees pay one comparison.
 #[derive(Default)]
 struct SpillStack {

@@ -106,7 +106,7 @@ pub fn offset_origin(p: Vec3A, n: Vec3A) -> Vec3A {
 /// acne, but it is too large for a scene scaled by 1e-4 (contact shadows
 /// vanish) and too small for one scaled by 1e4 (acne on a floor at
 /// `y = 0`), and 256 ulps of 1e5 is 2 units, which skips small occluders
-/// in a translated scene (`tests/robustness.rs`, scale invariance). Do not
+/// in a translated scene (`tests/render/robustness.rs`, scale invariance). Do not
 /// use this function with `ray.at(t)` points: their error is not bounded
 /// by the point's own ulps (seen: acne on a cone 10 units from the camera).
 #[inline]

@@ -59,7 +59,7 @@ impl WatertightRay {
     /// triangle's plane: the projected triangle is then a segment, every
     /// edge function is rounding noise, and the f32 test could report a hit
     /// where the ray is not even over the triangle (seen in
-    /// `tests/watertight.rs`). A ray whose three edge functions are all zero
+    /// `tests/kernels/watertight.rs`). A ray whose three edge functions are all zero
     /// within double precision rounding lies in the plane: no hit.
     #[inline]
     pub fn intersect(
@@ -125,7 +125,7 @@ impl WatertightRay {
     /// The usual interpolation `(u z0 + v z1 + w z2) / det` inherits the
     /// barycentrics' rounding, which grows with the triangle's aspect ratio
     /// times the distance of the origin: a 1:500 sliver seen from 80 units
-    /// away was hit 4.5e-4 off its plane (`tests/watertight.rs`), enough
+    /// away was hit 4.5e-4 off its plane (`tests/kernels/watertight.rs`), enough
     /// for secondary rays to self-intersect. In f64 the differences of f32
     /// coordinates and their products are exact, so `t` is correct to f32
     /// rounding for any triangle. Only called for hits.

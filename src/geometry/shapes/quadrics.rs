@@ -17,7 +17,7 @@ use crate::core::math::Ray;
 /// coefficients, which for a distant origin are large numbers that cancel:
 /// from 4000 units away a hyperboloid's two roots 3 units apart merged
 /// into one, and the "hit" was reported 1.4 units off the surface
-/// (`tests/proptest_kernels.rs`). From the closest point the coefficients
+/// (`tests/kernels/properties.rs`). From the closest point the coefficients
 /// are of the size of the shape and the distance of the line, and only
 /// the one rounding of the new origin (an ulp of the old one) remains.
 #[inline]
