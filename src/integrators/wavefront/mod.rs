@@ -40,10 +40,9 @@ use crate::scene::material::MaterialClass;
 /// small enough to balance two to a few dozen threads.
 pub const CHUNK: usize = 1024;
 
-/// Default number of paths (pixel samples) per batch. Render time hardly
-/// depends on it between 2048 and 65536 on the benchmark scenes (measured
-/// with `prism render --batch-paths`), but queue memory grows with it: with
-/// 48 lights a batch of 65536 paths held 466 MB of queues, 8192 hold 58 MB.
+/// Default number of paths (pixel samples) per batch: render time hardly
+/// depends on it over a wide range, but queue memory grows with it, so
+/// the default is small (the measurements are in the README's notes).
 pub const DEFAULT_BATCH_PATHS: usize = 1 << 13;
 
 /// Where each batch starts and how many paths it has.
