@@ -4,7 +4,7 @@
 //! stream ([`crate::accel::stream`]) traversal, so the three can never
 //! disagree about which boxes a ray enters.
 
-use glam::{Vec3A, Vec4};
+use glam::{BVec4A, Vec3A, Vec4};
 use obvhs::cwbvh::node::CwBvhNode;
 
 use crate::core::math::Ray;
@@ -119,8 +119,8 @@ impl DecodedNode {
     }
 
     /// Conservative slab test of `ray`'s interval `(t_min, t_max)` against
-    /// the eight children: bit `c` of the mask is set when the interval
-    /// overlaps child `c`'s box grown by the margin of [`NODE_MARGIN_EPS`]
+    /// the eight children, four per register: lane `c % 4` of mask
+    /// `c / 4` is set when the interval overlaps child `c`'s box grown by the margin of [`NODE_MARGIN_EPS`]
     /// (empty children's bits are meaningless: mask them with
     /// [`present_children`]). The second value holds, per child, the
     /// (widened) distance at which the ray enters it.
@@ -129,7 +129,7 @@ impl DecodedNode {
     /// coordinates; the reassociation's rounding (a few ulps of
     /// |origin - node| / |direction|) is far inside the margin.
     #[inline(always)]
-    pub fn test(&self, ray: &NodeRay, t_min: f32, t_max: f32) -> (u32, [Vec4; 2]) {
+    pub fn test_lanes(&self, ray: &NodeRay, t_min: f32, t_max: f32) -> ([BVec4A; 2], [Vec4; 2]) {
         let margin = NODE_MARGIN_EPS * f32::EPSILON * (ray.origin.w + self.mag);
         let parallel = ray.inv_dir.w.to_bits();
         let mut enter = [Vec4::splat(t_min); 2];
@@ -165,13 +165,21 @@ impl DecodedNode {
                 }
             }
         }
-        let mut hits = 0u32;
+        let mut hit = [BVec4A::FALSE; 2];
         for k in 0..2 {
             enter[k] -= enter[k].abs() * WIDEN;
             let x = exit[k] + exit[k].abs() * WIDEN;
-            hits |= enter[k].cmple(x).bitmask() << (4 * k);
+            hit[k] = enter[k].cmple(x);
         }
-        (hits, enter)
+        (hit, enter)
+    }
+
+    /// [`Self::test_lanes`] as a bit mask: bit `c` set when the ray enters
+    /// child `c` (see there), with the entry distances.
+    #[inline(always)]
+    pub fn test(&self, ray: &NodeRay, t_min: f32, t_max: f32) -> (u32, [Vec4; 2]) {
+        let (hit, enter) = self.test_lanes(ray, t_min, t_max);
+        (hit[0].bitmask() | hit[1].bitmask() << 4, enter)
     }
 }
 

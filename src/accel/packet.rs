@@ -8,7 +8,7 @@
 //! bookkeeping for up to eight rays. Primitive tests stay per lane and call
 //! the same kernels as single-ray traversal, so the hits are the same.
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use obvhs::cwbvh::CwBvh;
 
 use crate::accel::node::{DecodedNode, NodeRay, present_children};
@@ -74,19 +74,37 @@ impl Packet {
     /// distance among them.
     #[inline(always)]
     fn test_node(&self, node: &DecodedNode, active: LaneMask) -> ([LaneMask; 8], [f32; 8]) {
-        let mut lanes = [0 as LaneMask; 8];
-        let mut near = [f32::INFINITY; 8];
+        // Byte `l` of `masks`: the children lane `l` enters. Entry
+        // distances are folded per register, without branches.
+        let mut masks = 0u64;
+        let mut near = [Vec4::INFINITY; 2];
         for_each_lane(active, |l| {
-            let (mut hits, enter) = node.test(&self.node_rays[l], self.t_min[l], self.t_max[l]);
-            while hits != 0 {
-                let c = hits.trailing_zeros() as usize;
-                hits &= hits - 1;
-                lanes[c] |= 1 << l;
-                near[c] = near[c].min(enter[c / 4][c % 4]);
+            let (hit, enter) = node.test_lanes(&self.node_rays[l], self.t_min[l], self.t_max[l]);
+            masks |= ((hit[0].bitmask() | hit[1].bitmask() << 4) as u64) << (8 * l);
+            for k in 0..2 {
+                near[k] = Vec4::select(hit[k], near[k].min(enter[k]), near[k]);
             }
         });
+        // Transpose the 8x8 bit matrix: byte `c` becomes the lanes that
+        // enter child `c`.
+        let t = transpose8x8(masks);
+        let lanes = std::array::from_fn(|c| ((t >> (8 * c)) & 0xff) as LaneMask);
+        let near = std::array::from_fn(|c| near[c / 4][c % 4]);
         (lanes, near)
     }
+}
+
+/// Transposes an 8x8 bit matrix held as eight bytes (bit `j` of byte `i`
+/// becomes bit `i` of byte `j`), by three rounds of block swaps.
+#[inline(always)]
+fn transpose8x8(mut x: u64) -> u64 {
+    let t = (x ^ (x >> 7)) & 0x00aa_00aa_00aa_00aa;
+    x ^= t ^ (t << 7);
+    let t = (x ^ (x >> 14)) & 0x0000_cccc_0000_cccc;
+    x ^= t ^ (t << 14);
+    let t = (x ^ (x >> 28)) & 0x0000_0000_f0f0_f0f0;
+    x ^= t ^ (t << 28);
+    x
 }
 
 /// Most node entries a traversal stack holds (depth times eight children).
@@ -194,6 +212,22 @@ pub fn for_each_lane(mut mask: LaneMask, mut f: impl FnMut(usize)) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bit_matrix_transpose() {
+        let mut s = 99u64;
+        for _ in 0..100 {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let t = transpose8x8(s);
+            for i in 0..8 {
+                for j in 0..8 {
+                    assert_eq!((s >> (8 * i + j)) & 1, (t >> (8 * j + i)) & 1);
+                }
+            }
+        }
+    }
 
     #[test]
     fn lanes_enter_the_children_their_rays_pass_through() {

@@ -27,7 +27,8 @@ const FIXED_CAPACITY: usize = 31;
 impl FastStack<UVec2> for SpillStack {
     #[inline(always)]
     fn push(&mut self, v: UVec2) {
-        if self.heap.is_empty() && self.fixed.len() < FIXED_CAPACITY {
+        // The heap holds entries only while the fixed part is full.
+        if self.fixed.len() < FIXED_CAPACITY {
             self.fixed.push(v);
         } else {
             self.heap.push(v);
@@ -35,9 +36,10 @@ impl FastStack<UVec2> for SpillStack {
     }
     #[inline(always)]
     fn pop_fast(&mut self) -> UVec2 {
-        match self.heap.pop() {
-            Some(v) => v,
-            None => self.fixed.pop_fast(),
+        if self.heap.is_empty() {
+            self.fixed.pop_fast()
+        } else {
+            self.heap.pop().unwrap_or_default()
         }
     }
     #[inline(always)]
