@@ -61,7 +61,7 @@ pub struct ExtractedScene {
 }
 
 /// The render-ready scene with its BVH. It persists between frames and is
-/// updated in place by the systems of [`sync`].
+/// updated in place by the systems of [`sync`](super::sync).
 #[derive(Resource, Default)]
 pub struct SceneAccel {
     /// The scene, once built.

@@ -5,7 +5,7 @@
 //! [`Transform`](crate::geometry::transform::Transform), [`Shape`](crate::geometry::shapes::Shape)
 //! or [`MeshInstance`],
 //! [`Material`](crate::scene::material::Material), [`Light`](crate::scene::light::Light)
-//! and [`Camera`]. Each frame runs three stages, declared once in
+//! and [`Camera`](crate::scene::camera::Camera). Each frame runs three stages, declared once in
 //! [`add_render_systems`]:
 //!
 //! 1. [`PrismSystems::Extract`]: apply what changed in the world since the
@@ -126,7 +126,7 @@ pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
 /// and a [`Shape`](crate::geometry::shapes::Shape) or [`MeshInstance`] (optionally
 /// a [`Material`](crate::scene::material::Material)), lights
 /// ([`Light`](crate::scene::light::Light), placed by their transform) and a
-/// [`Camera`] are rendered; each frame only what changed is updated.
+/// [`Camera`](crate::scene::camera::Camera) are rendered; each frame only what changed is updated.
 /// Order your game systems `.before(PrismSystems::Extract)` so a frame
 /// shows this tick's state, and call [`World::clear_trackers`] after each
 /// run (or use [`run_frame`]).

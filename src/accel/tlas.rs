@@ -6,7 +6,7 @@
 //! leaves. Traversal uses a [`CwBvh`] converted from it after each batch of
 //! changes (see `Tlas::commit`): conversion is linear in the number of
 //! instances, needs no sort, and keeps every traversal path (single rays,
-//! packets, the conservative node test of [`crate::geometry::mesh::traverse_bvh`])
+//! packets, the conservative node test of [`crate::accel::single::traverse_bvh`])
 //! unchanged.
 //!
 //! Every instance has a *key*: its primitive id in the [`Bvh2`]. Keys stay

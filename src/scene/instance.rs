@@ -29,7 +29,7 @@ pub struct Instance {
     pub geometry: InstanceGeometry,
     /// World/object matrices.
     pub transform: InstanceTransform,
-    /// Index into [`RenderScene::materials`].
+    /// Index into [`RenderScene::materials`](crate::scene::RenderScene::materials).
     pub material: u32,
 }
 

@@ -16,7 +16,7 @@ use crate::scene::render_scene::RenderScene;
 /// place where anything derived from instances and materials is brought up
 /// to date. Between a change and the commit, intersection queries must not
 /// be made. Mesh BVHs are never rebuilt: they live in the shared
-/// [`Mesh`]es; only the top level over instances changes.
+/// [`Mesh`](crate::geometry::mesh::Mesh)es; only the top level over instances changes.
 impl RenderScene {
     /// Appends an instance; returns its index. Its material index must be
     /// valid once the scene is committed.
