@@ -116,7 +116,11 @@ pub fn traverse_bvh(
     let mut any = false;
     let start = bvh.new_traversal(ray.direction);
     let mut state = Walk {
-        stack: SpillStack::default(),
+        // obvhs's empty fixed stack, with a heap part behind it.
+        stack: SpillStack {
+            fixed: start.stack,
+            heap: Vec::new(),
+        },
         current_group: start.current_group,
         primitive_group: start.primitive_group,
         oct_inv4: start.oct_inv4,
