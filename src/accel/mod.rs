@@ -1,11 +1,14 @@
 //! Layer 1: acceleration structures over boxes. BVH build presets and
-//! padded boxes, the one conservative node test, and the single-ray,
-//! packet and stream traversals that share it, and the top-level BVH over
-//! placements. Knows nothing of what the boxes contain.
+//! padded boxes, Prism's 8-wide node layout, the one conservative node
+//! test, the single-ray, packet and stream traversals that share it, the
+//! top-level BVH over placements, and the choice of SIMD code path.
+//! Knows nothing of what the boxes contain.
 
 pub mod build;
+pub mod bvh8;
 pub mod node;
 pub mod packet;
+pub mod simd;
 pub mod single;
 pub mod stream;
 pub mod tlas;

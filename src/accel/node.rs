@@ -1,16 +1,16 @@
-//! The conservative node test: one decode of a CwBvh node's eight child
-//! boxes and one slab test of a ray against them, shared by single-ray
-//! ([`crate::accel::single`]), packet ([`crate::accel::packet`]) and
-//! stream ([`crate::accel::stream`]) traversal, so the three can never
-//! disagree about which boxes a ray enters.
+//! The conservative node test: one ray against the eight float child
+//! boxes of a [`Node8`], shared by single-ray ([`crate::accel::single`]),
+//! packet ([`crate::accel::packet`]) and stream ([`crate::accel::stream`])
+//! traversal, so the three can never disagree about which boxes a ray
+//! enters.
 
-use glam::{BVec4A, Vec3A, Vec4};
-use obvhs::cwbvh::node::CwBvhNode;
+use glam::Vec4;
 
+use crate::accel::bvh8::{Bvh8, Node8, WIDTH};
 use crate::core::math::Ray;
 
 /// Rounding margin of the node test, in units of `f32::EPSILON` times the
-/// larger coordinate magnitude of the ray origin and the node.
+/// larger coordinate magnitude of the ray origin and the tree.
 ///
 /// The watertight triangle test accepts a ray when its *rounded* sheared
 /// coordinates put it inside the triangle. Those coordinates are
@@ -20,192 +20,219 @@ use crate::core::math::Ray;
 /// much. This matters at shared edges and vertices: the consistent edge
 /// functions give the ray to exactly one of the neighbours, and if that
 /// neighbour's box were culled the ray would pass through the mesh. Boxes
-/// are therefore grown by 16 EPS (|origin| + |node|) per axis, which also
-/// covers the rounding of the slab computation itself and of the
-/// quantised child boxes. (obvhs's own node test pads nothing, ignores
-/// `tmin` and rejects every box closer than `t = 1e-4`, a scene-scale
-/// epsilon; both made rays leak through closed meshes.)
+/// are therefore grown by 16 EPS (|origin| + |tree|) per axis. The margin
+/// is computed once per ray from the largest coordinate of the whole tree
+/// ([`Bvh8::magnitude`]), so it is never smaller than a margin taken per
+/// node. It also covers the rounding of the slab distances themselves:
+/// each is one difference and one product, off by at most 2 EPS of
+/// (|plane| + |origin| + margin) / |direction|, an eighth of the margin's
+/// own contribution. (obvhs's own node test pads nothing, ignores `tmin`
+/// and rejects every box closer than `t = 1e-4`, a scene-scale epsilon;
+/// both made rays leak through closed meshes.)
 pub const NODE_MARGIN_EPS: f32 = 16.0;
 
-/// Relative widening of the slab distances: each carries one or two
-/// roundings.
-const WIDEN: f32 = 4.0 * f32::EPSILON;
+/// The margin of a ray from `origin_magnitude` against a tree whose
+/// coordinates reach `tree_magnitude`.
+#[inline(always)]
+pub fn margin(origin_magnitude: f32, tree_magnitude: f32) -> f32 {
+    NODE_MARGIN_EPS * f32::EPSILON * (origin_magnitude + tree_magnitude)
+}
 
-/// A ray prepared for node tests: origin with its largest coordinate
-/// magnitude, and reciprocal direction with the axes it does not move
-/// along.
+/// Larger of `a` and `b`, `b` when either is NaN (one `maxps`).
+///
+/// Slab distances are NaN only for a ray that does not move along an
+/// axis and starts exactly on a (grown) plane: `0 * inf`. Passing them as
+/// `a` ignores them, which keeps the box: conservative.
+#[inline(always)]
+pub fn max_keep(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// Smaller of `a` and `b`, `b` when either is NaN (one `minps`).
+#[inline(always)]
+pub fn min_keep(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// A ray prepared for node tests: per axis the rows of the near and far
+/// planes (by the direction's sign), the origin shifted by the margin
+/// towards each, and the reciprocal direction (infinite on axes the ray
+/// does not move along).
 #[derive(Clone, Copy, Debug)]
 pub struct NodeRay {
-    /// Origin; `w` is its largest coordinate magnitude.
-    origin: Vec4,
-    /// Reciprocal direction (0 on axes whose reciprocal is not finite);
-    /// the bits of `w` flag those axes.
-    inv_dir: Vec4,
+    /// Origin minus the margin's shift, for near planes.
+    pub o_near: [f32; 3],
+    /// Origin plus the margin's shift, for far planes.
+    pub o_far: [f32; 3],
+    /// `1 / direction`.
+    pub inv: [f32; 3],
+    /// Row in [`Node8::planes`] of each axis's near plane.
+    pub near: [u8; 3],
+    /// Row of each axis's far plane.
+    pub far: [u8; 3],
+    /// Octant of the direction: bit `a` set when axis `a` points down.
+    pub octant: u8,
 }
 
 impl NodeRay {
-    /// Prepares `ray`.
-    #[inline]
-    pub fn new(ray: &Ray) -> Self {
-        let mut parallel = 0u32;
-        let mut inv = [0.0; 3];
-        for (a, inv) in inv.iter_mut().enumerate() {
-            let i = 1.0 / ray.direction[a];
-            if i.is_finite() {
-                *inv = i;
+    /// Prepares `ray` for the nodes of `bvh`.
+    #[inline(always)]
+    pub fn new(ray: &Ray, bvh: &Bvh8) -> Self {
+        Self::with_magnitude(ray, bvh.magnitude)
+    }
+
+    /// Prepares `ray` for a tree whose coordinates reach `magnitude`.
+    #[inline(always)]
+    pub fn with_magnitude(ray: &Ray, magnitude: f32) -> Self {
+        let o = ray.origin;
+        let m = margin(o.abs().max_element(), magnitude);
+        let mut r = NodeRay {
+            o_near: [0.0; 3],
+            o_far: [0.0; 3],
+            inv: [0.0; 3],
+            near: [0; 3],
+            far: [0; 3],
+            octant: 0,
+        };
+        for a in 0..3 {
+            let d = ray.direction[a];
+            let inv = 1.0 / d;
+            r.inv[a] = inv;
+            // The near plane of a grown box is lo - m for rays going up:
+            // (lo - m - o) inv = (lo - (o + m)) inv; hi + m going down.
+            if inv.is_sign_negative() {
+                r.near[a] = 3 + a as u8;
+                r.far[a] = a as u8;
+                r.o_near[a] = o[a] - m;
+                r.o_far[a] = o[a] + m;
+                r.octant |= 1 << a;
             } else {
-                parallel |= 1 << a;
+                r.near[a] = a as u8;
+                r.far[a] = 3 + a as u8;
+                r.o_near[a] = o[a] + m;
+                r.o_far[a] = o[a] - m;
             }
         }
-        Self {
-            origin: ray.origin.extend(ray.origin.abs().max_element()),
-            inv_dir: Vec4::new(inv[0], inv[1], inv[2], f32::from_bits(parallel)),
+        r
+    }
+
+    /// Tests the interval `(t_min, t_max)` against the eight children of
+    /// `node`: bit `c` of the mask is set when the ray enters child `c`'s
+    /// box grown by the margin, and `enter[c]` is the distance at which it
+    /// does (at least `t_min`). Empty slots are never entered. `AVX`
+    /// selects the AVX2 code (only valid on a CPU that has it, see
+    /// [`crate::accel::simd`]); both give the same bits.
+    #[inline(always)]
+    pub fn test<const AVX: bool>(
+        &self,
+        node: &Node8,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is set only by the AVX2 entry points, which run
+            // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
+            #[allow(unsafe_code)]
+            return unsafe { self.test_avx2(node, t_min, t_max) };
         }
-    }
-}
-
-/// The eight child boxes of one CwBvh node as floats (quantised
-/// coordinates, the node's origin and scale), four children per register.
-#[derive(Clone, Copy, Debug)]
-pub struct DecodedNode {
-    q_lo: [[Vec4; 2]; 3],
-    q_hi: [[Vec4; 2]; 3],
-    p: Vec3A,
-    extent: Vec3A,
-    /// Largest coordinate magnitude of the node's box.
-    mag: f32,
-}
-
-impl DecodedNode {
-    /// Decodes `node`.
-    #[inline(always)]
-    pub fn new(node: &CwBvhNode) -> Self {
-        let extent = node.compute_extent();
-        let p = Vec3A::from(node.p);
-        let quads = |q: &[u8; 8]| {
-            [
-                Vec4::new(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32),
-                Vec4::new(q[4] as f32, q[5] as f32, q[6] as f32, q[7] as f32),
-            ]
-        };
-        Self {
-            q_lo: [
-                quads(&node.child_min_x),
-                quads(&node.child_min_y),
-                quads(&node.child_min_z),
-            ],
-            q_hi: [
-                quads(&node.child_max_x),
-                quads(&node.child_max_y),
-                quads(&node.child_max_z),
-            ],
-            p,
-            extent,
-            mag: p.abs().max((p + extent * 255.0).abs()).max_element(),
-        }
+        self.test_portable(node, t_min, t_max)
     }
 
-    /// Twice the centre of child `c`'s box (a sort key for visiting
-    /// children along a direction).
+    /// [`Self::test`] in two 4-wide halves (SSE2 on x86-64).
     #[inline(always)]
-    pub fn child_centre2(&self, c: usize) -> Vec3A {
-        let (k, i) = (c / 4, c % 4);
-        let axis = |a: usize| {
-            let lo = self.q_lo[a][k][i] * self.extent[a] + self.p[a];
-            let hi = self.q_hi[a][k][i] * self.extent[a] + self.p[a];
-            lo + hi
-        };
-        Vec3A::new(axis(0), axis(1), axis(2))
-    }
-
-    /// Conservative slab test of `ray`'s interval `(t_min, t_max)` against
-    /// the eight children, four per register: lane `c % 4` of mask
-    /// `c / 4` is set when the interval overlaps child `c`'s box grown by the margin of [`NODE_MARGIN_EPS`]
-    /// (empty children's bits are meaningless: mask them with
-    /// [`present_children`]). The second value holds, per child, the
-    /// (widened) distance at which the ray enters it.
-    ///
-    /// Plane distances are one multiply-add from the quantised
-    /// coordinates; the reassociation's rounding (a few ulps of
-    /// |origin - node| / |direction|) is far inside the margin.
-    #[inline(always)]
-    pub fn test_lanes(&self, ray: &NodeRay, t_min: f32, t_max: f32) -> ([BVec4A; 2], [Vec4; 2]) {
-        let margin = NODE_MARGIN_EPS * f32::EPSILON * (ray.origin.w + self.mag);
-        let parallel = ray.inv_dir.w.to_bits();
+    fn test_portable(&self, node: &Node8, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
         let mut enter = [Vec4::splat(t_min); 2];
         let mut exit = [Vec4::splat(t_max); 2];
         for a in 0..3 {
-            let (p, o) = (self.p[a], ray.origin[a]);
-            if parallel & (1 << a) != 0 {
-                // The ray does not move along this axis: inside the slab or not.
-                let e = Vec4::splat(self.extent[a]);
-                let ov = Vec4::splat(o);
-                let (base_lo, base_hi) = (Vec4::splat(p - margin), Vec4::splat(p + margin));
-                for k in 0..2 {
-                    let inside = (self.q_lo[a][k] * e + base_lo).cmple(ov)
-                        & ov.cmple(self.q_hi[a][k] * e + base_hi);
-                    enter[k] = Vec4::select(inside, enter[k], Vec4::INFINITY);
-                    exit[k] = Vec4::select(inside, exit[k], Vec4::NEG_INFINITY);
-                }
-            } else {
-                let inv = ray.inv_dir[a];
-                let scale = Vec4::splat(self.extent[a] * inv);
-                let off_lo = Vec4::splat((p - margin - o) * inv);
-                let off_hi = Vec4::splat((p + margin - o) * inv);
-                for k in 0..2 {
-                    let t_lo = self.q_lo[a][k] * scale + off_lo;
-                    let t_hi = self.q_hi[a][k] * scale + off_hi;
-                    let (near, far) = if inv >= 0.0 {
-                        (t_lo, t_hi)
-                    } else {
-                        (t_hi, t_lo)
-                    };
-                    enter[k] = enter[k].max(near);
-                    exit[k] = exit[k].min(far);
-                }
+            let near = &node.planes[self.near[a] as usize];
+            let far = &node.planes[self.far[a] as usize];
+            let on = Vec4::splat(self.o_near[a]);
+            let of = Vec4::splat(self.o_far[a]);
+            let inv = Vec4::splat(self.inv[a]);
+            for k in 0..2 {
+                let n = Vec4::new(
+                    near[4 * k],
+                    near[4 * k + 1],
+                    near[4 * k + 2],
+                    near[4 * k + 3],
+                );
+                let f = Vec4::new(far[4 * k], far[4 * k + 1], far[4 * k + 2], far[4 * k + 3]);
+                enter[k] = max4((n - on) * inv, enter[k]);
+                exit[k] = min4((f - of) * inv, exit[k]);
             }
         }
-        let mut hit = [BVec4A::FALSE; 2];
-        for k in 0..2 {
-            enter[k] -= enter[k].abs() * WIDEN;
-            let x = exit[k] + exit[k].abs() * WIDEN;
-            hit[k] = enter[k].cmple(x);
-        }
-        (hit, enter)
+        let mask = enter[0].cmple(exit[0]).bitmask() | enter[1].cmple(exit[1]).bitmask() << 4;
+        let (e0, e1) = (enter[0].to_array(), enter[1].to_array());
+        (
+            mask,
+            [e0[0], e0[1], e0[2], e0[3], e1[0], e1[1], e1[2], e1[3]],
+        )
     }
 
-    /// [`Self::test_lanes`] as a bit mask: bit `c` set when the ray enters
-    /// child `c` (see there), with the entry distances.
-    #[inline(always)]
-    pub fn test(&self, ray: &NodeRay, t_min: f32, t_max: f32) -> (u32, [Vec4; 2]) {
-        let (hit, enter) = self.test_lanes(ray, t_min, t_max);
-        (hit[0].bitmask() | hit[1].bitmask() << 4, enter)
+    /// [`Self::test`] in one 8-wide AVX register.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn test_avx2(&self, node: &Node8, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+        use std::arch::x86_64::*;
+        let mut enter = _mm256_set1_ps(t_min);
+        let mut exit = _mm256_set1_ps(t_max);
+        for a in 0..3 {
+            let near: __m256 = bytemuck::cast(node.planes[self.near[a] as usize]);
+            let far: __m256 = bytemuck::cast(node.planes[self.far[a] as usize]);
+            let inv = _mm256_set1_ps(self.inv[a]);
+            let tn = _mm256_mul_ps(_mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a])), inv);
+            let tf = _mm256_mul_ps(_mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a])), inv);
+            // max(a, b) = a > b ? a : b, as `max_keep`.
+            enter = _mm256_max_ps(tn, enter);
+            exit = _mm256_min_ps(tf, exit);
+        }
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
+        (mask, bytemuck::cast(enter))
     }
 }
 
-/// The children of `node` that exist, as a bit mask.
+/// [`max_keep`] lane by lane (one `maxps`, whose NaN rule is exactly
+/// that of `max_keep`).
 #[inline(always)]
-pub fn present_children(node: &CwBvhNode) -> u32 {
-    let mut present = 0u32;
-    for c in 0..8 {
-        if !node.is_child_empty(c) {
-            present |= 1 << c;
-        }
+pub fn max4(a: Vec4, b: Vec4) -> Vec4 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::_mm_max_ps;
+        // SAFETY: SSE is part of the x86-64 baseline: every x86-64 CPU has it.
+        #[allow(unsafe_code)]
+        Vec4::from(unsafe { _mm_max_ps(a.into(), b.into()) })
     }
-    present
+    #[cfg(not(target_arch = "x86_64"))]
+    Vec4::select(a.cmpgt(b), a, b)
+}
+
+/// [`min_keep`] lane by lane (one `minps`).
+#[inline(always)]
+pub fn min4(a: Vec4, b: Vec4) -> Vec4 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::_mm_min_ps;
+        // SAFETY: SSE is part of the x86-64 baseline: every x86-64 CPU has it.
+        #[allow(unsafe_code)]
+        Vec4::from(unsafe { _mm_min_ps(a.into(), b.into()) })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    Vec4::select(a.cmplt(b), a, b)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3A;
+    use obvhs::aabb::Aabb;
 
-    /// The decoded test against a plain f64 slab test on boxes built by
-    /// obvhs: every box the exact test enters is entered (conservative),
-    /// and boxes far from the ray are not.
+    /// The test against a plain f64 slab test on the child boxes of a
+    /// built tree: every box the exact test enters is entered
+    /// (conservative), and boxes far from the ray are not.
     #[test]
     fn node_test_is_conservative_and_tight() {
-        use crate::accel::build::{BuildQuality, build_bvh};
-        use obvhs::aabb::Aabb;
         let mut boxes = Vec::new();
         let mut s = 1u64;
         let mut next = || {
@@ -219,7 +246,7 @@ mod tests {
             let h = Vec3A::new(next().abs(), next().abs(), next().abs()) * 0.5 + 0.01;
             boxes.push(Aabb::new(c - h, c + h));
         }
-        let bvh = build_bvh(&boxes, BuildQuality::Medium);
+        let bvh = Bvh8::build(&boxes, obvhs::BvhBuildParams::medium_build(), 1);
         let (mut entered, mut exact_hits) = (0, 0);
         for r in 0..300 {
             let o = Vec3A::new(next(), next(), next()) * 15.0;
@@ -231,20 +258,18 @@ mod tests {
                 d.y = -0.0;
             }
             let ray = Ray::new(o, d.normalize());
-            let nr = NodeRay::new(&ray);
+            let nr = NodeRay::new(&ray, &bvh);
             for node in &bvh.nodes {
-                let dn = DecodedNode::new(node);
-                let (mask, _) = dn.test(&nr, 0.0, f32::INFINITY);
-                let mask = mask & present_children(node);
-                for c in 0..8 {
-                    if node.is_child_empty(c) {
+                let (mask, _) = nr.test::<false>(node, 0.0, f32::INFINITY);
+                for c in 0..WIDTH {
+                    if node.child[c] == crate::accel::bvh8::EMPTY {
+                        assert_eq!((mask >> c) & 1, 0, "an empty slot was entered");
                         continue;
                     }
-                    let b = node.child_aabb(c);
-                    // f64 slab test on the decoded box.
+                    let (lo, hi) = node.child_box(c);
                     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
                     for a in 0..3 {
-                        let (lo, hi) = (b.min[a] as f64, b.max[a] as f64);
+                        let (lo, hi) = (lo[a] as f64, hi[a] as f64);
                         let (o, d) = (ray.origin[a] as f64, ray.direction[a] as f64);
                         if d == 0.0 {
                             if o < lo || o > hi {
@@ -272,5 +297,23 @@ mod tests {
             entered as f64 <= exact_hits as f64 * 1.01 + 5.0,
             "{entered} vs {exact_hits}"
         );
+    }
+
+    /// A ray that does not move along an axis and starts exactly on a
+    /// grown plane gives `0 * inf = NaN` there; the box must be kept.
+    #[test]
+    fn parallel_ray_on_a_plane_keeps_the_box() {
+        let boxes = [Aabb::new(Vec3A::ZERO, Vec3A::ONE)];
+        let bvh = Bvh8::build(&boxes, obvhs::BvhBuildParams::medium_build(), 1);
+        let m = margin(0.0, bvh.magnitude);
+        for x in [-m, 0.0, 0.5, 1.0] {
+            let ray = Ray::new(Vec3A::new(x, 0.5, -3.0), Vec3A::Z);
+            let (mask, _) =
+                NodeRay::new(&ray, &bvh).test::<false>(&bvh.nodes[0], 0.0, f32::INFINITY);
+            assert_eq!(mask & 1, 1, "x = {x}");
+        }
+        let ray = Ray::new(Vec3A::new(1.1, 0.5, -3.0), Vec3A::Z);
+        let (mask, _) = NodeRay::new(&ray, &bvh).test::<false>(&bvh.nodes[0], 0.0, f32::INFINITY);
+        assert_eq!(mask & 1, 0);
     }
 }

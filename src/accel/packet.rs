@@ -1,17 +1,23 @@
-//! Packet traversal of obvhs's CWBVH: up to [`LANES`] rays visit the tree
+//! Packet traversal of a [`Bvh8`]: up to [`LANES`] rays visit the tree
 //! together.
 //!
-//! Each node's eight child boxes are decoded once and tested against every
-//! active lane in a branch-free loop over structure-of-arrays lanes, which
-//! the compiler turns into SIMD. Coherent rays (camera rays, shadow rays
-//! towards one light) share most nodes, so a packet does one traversal's
-//! bookkeeping for up to eight rays. Primitive tests stay per lane and call
-//! the same kernels as single-ray traversal, so the hits are the same.
+//! When the packet's rays share a direction octant (camera rays of a
+//! pixel block, shadow rays towards one light), each node's children are
+//! tested one at a time against every lane at once: structure-of-arrays
+//! lanes in a branch-free loop that the compiler turns into SIMD across
+//! rays. The packet does one traversal's bookkeeping for all its rays.
+//! When only a lane or two still enter a subtree (the packet has
+//! diverged), those lanes finish it alone with single-ray traversal
+//! ([`crate::accel::single`]); a packet whose rays point into different
+//! octants is traced ray by ray from the start. Leaf primitives are
+//! tested per lane by the caller with the same kernels as single rays, so
+//! the hits are the same.
 
 use glam::{Vec3A, Vec4};
-use obvhs::cwbvh::CwBvh;
 
-use crate::accel::node::{DecodedNode, NodeRay, present_children};
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
+use crate::accel::node::{NodeRay, max4, min_keep, min4};
+use crate::accel::single::traverse_from;
 use crate::core::math::Ray;
 
 /// Rays per packet.
@@ -23,16 +29,17 @@ pub type LaneMask = u32;
 /// Every lane of a full packet.
 pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 
+/// A packet that has shrunk to this many lanes continues ray by ray.
+const DIVERGED: u32 = 2;
+
 /// Rays with their search intervals, lane by lane.
 #[derive(Clone, Copy, Debug)]
 pub struct Packet {
-    /// The rays prepared for the node test.
-    node_rays: [NodeRay; LANES],
     /// Interval starts.
     pub t_min: [f32; LANES],
     /// Interval ends; closest-hit traversal shrinks them as hits are found.
     pub t_max: [f32; LANES],
-    /// The rays themselves, for primitive tests.
+    /// The rays themselves.
     pub rays: [Ray; LANES],
     /// Lanes holding a ray.
     pub valid: LaneMask,
@@ -46,7 +53,6 @@ impl Packet {
         );
         let empty = Ray::new(Vec3A::ZERO, Vec3A::X);
         let mut p = Packet {
-            node_rays: [NodeRay::new(&empty); LANES],
             t_min: [0.0; LANES],
             // Unused lanes can never hit.
             t_max: [f32::NEG_INFINITY; LANES],
@@ -62,141 +68,230 @@ impl Packet {
     /// Puts ray `r` in lane `l`.
     #[inline]
     pub fn set_lane(&mut self, l: usize, r: Ray, t_min: f32, t_max: f32) {
-        self.node_rays[l] = NodeRay::new(&r);
         self.t_min[l] = t_min;
         self.t_max[l] = t_max;
         self.rays[l] = r;
         self.valid |= 1 << l;
     }
-
-    /// The node test of every lane in `active` against the children of
-    /// `node`: per child, the lanes that enter it and the smallest entry
-    /// distance among them.
-    #[inline(always)]
-    fn test_node(&self, node: &DecodedNode, active: LaneMask) -> ([LaneMask; 8], [f32; 8]) {
-        // Byte `l` of `masks`: the children lane `l` enters. Entry
-        // distances are folded per register, without branches.
-        let mut masks = 0u64;
-        let mut near = [Vec4::INFINITY; 2];
-        for_each_lane(active, |l| {
-            let (hit, enter) = node.test_lanes(&self.node_rays[l], self.t_min[l], self.t_max[l]);
-            masks |= ((hit[0].bitmask() | hit[1].bitmask() << 4) as u64) << (8 * l);
-            for k in 0..2 {
-                near[k] = Vec4::select(hit[k], near[k].min(enter[k]), near[k]);
-            }
-        });
-        // Transpose the 8x8 bit matrix: byte `c` becomes the lanes that
-        // enter child `c`.
-        let t = transpose8x8(masks);
-        let lanes = std::array::from_fn(|c| ((t >> (8 * c)) & 0xff) as LaneMask);
-        let near = std::array::from_fn(|c| near[c / 4][c % 4]);
-        (lanes, near)
-    }
 }
 
-/// Transposes an 8x8 bit matrix held as eight bytes (bit `j` of byte `i`
-/// becomes bit `i` of byte `j`), by three rounds of block swaps.
-#[inline(always)]
-fn transpose8x8(mut x: u64) -> u64 {
-    let t = (x ^ (x >> 7)) & 0x00aa_00aa_00aa_00aa;
-    x ^= t ^ (t << 7);
-    let t = (x ^ (x >> 14)) & 0x0000_cccc_0000_cccc;
-    x ^= t ^ (t << 14);
-    let t = (x ^ (x >> 28)) & 0x0000_0000_f0f0_f0f0;
-    x ^= t ^ (t << 28);
-    x
+/// The lanes of a packet prepared for one tree, axis by axis.
+struct Lanes {
+    o_near: [[f32; LANES]; 3],
+    o_far: [[f32; LANES]; 3],
+    inv: [[f32; LANES]; 3],
+    /// Row of each axis's near plane (common to all lanes).
+    near: [usize; 3],
 }
 
-/// Most node entries a traversal stack holds (depth times eight children).
-const STACK: usize = 32 * 8;
+/// A pending subtree: child reference, lanes, smallest entry distance.
+type Pending = (u32, LaneMask, f32);
 
-/// Visits every leaf primitive slot whose box some lane's interval
-/// reaches, calling `leaf(packet, lanes, slot)` with the lanes that reach
-/// it; `slot` indexes `bvh.primitive_indices`. For closest-hit queries
-/// `leaf` shrinks `packet.t_max` of the lanes it hits, which prunes the
-/// rest of the traversal; for occlusion queries it returns the lanes found
-/// blocked, which retires them. Traversal ends when no lane is left.
+/// Visits every leaf whose box some lane's interval reaches, calling
+/// `leaf(packet, lanes, leaf)` with the lanes that reach it (`leaf`
+/// indexes [`Bvh8::leaves`]). For closest-hit queries `leaf` shrinks
+/// `packet.t_max` of the lanes it hits, which prunes the rest of the
+/// traversal; for occlusion queries it returns the lanes found blocked,
+/// which retires them. Traversal ends when no lane is left.
 ///
-/// Children are visited nearest first (by the packet's smallest entry
-/// distance), and a popped node is skipped when no lane can still reach it.
-pub fn traverse(
-    bvh: &CwBvh,
+/// Children are visited nearest first (by the smallest entry distance of
+/// the lanes that enter them), and a popped subtree is skipped for lanes
+/// that have since found a nearer hit.
+#[inline(always)]
+pub fn traverse<const AVX: bool>(
+    bvh: &Bvh8,
     packet: &mut Packet,
     active: LaneMask,
-    mut leaf: impl FnMut(&mut Packet, LaneMask, usize) -> LaneMask,
+    mut leaf: impl FnMut(&mut Packet, LaneMask, u32) -> LaneMask,
 ) {
-    if bvh.nodes.is_empty() {
+    let mut alive = active & packet.valid;
+    if bvh.nodes.is_empty() || alive == 0 {
         return;
     }
-    let mut alive = active & packet.valid;
-    // Left uninitialised: zeroing 3 KB per traversal cost more than the
-    // traversal of a small tree. Only entries below `top` are ever read.
-    let mut stack = [const { std::mem::MaybeUninit::<(u32, LaneMask, f32)>::uninit() }; STACK];
-    let mut spill: Vec<(u32, LaneMask, f32)> = Vec::new();
-    let mut top = 1;
-    stack[0].write((0, alive, f32::NEG_INFINITY));
-    while top > 0 && alive != 0 {
-        top -= 1;
-        let (index, lanes, near) = if top >= STACK {
-            spill.pop().expect("spilled entries above the fixed stack")
-        } else {
-            // SAFETY: every entry below `top` (and below STACK) was written
-            // before `top` passed it.
-            #[allow(unsafe_code)]
-            unsafe {
-                stack[top].assume_init()
-            }
-        };
-        let lanes = lanes & alive;
-        if lanes == 0 {
-            continue;
-        }
-        // Skip when every lane has since found a hit nearer than the node.
-        let mut reachable = false;
+    let node_rays: [NodeRay; LANES] = std::array::from_fn(|l| NodeRay::new(&packet.rays[l], bvh));
+    let octant = node_rays[alive.trailing_zeros() as usize].octant;
+    let mut mixed = false;
+    for_each_lane(alive, |l| mixed |= node_rays[l].octant != octant);
+    if mixed {
+        for_each_lane(alive, |l| {
+            single_lane::<AVX>(bvh, 0, &node_rays[l], packet, l, &mut leaf);
+        });
+        return;
+    }
+    let mut lanes = Lanes {
+        o_near: [[0.0; LANES]; 3],
+        o_far: [[0.0; LANES]; 3],
+        inv: [[0.0; LANES]; 3],
+        near: [0; 3],
+    };
+    for a in 0..3 {
+        lanes.near[a] = node_rays[alive.trailing_zeros() as usize].near[a] as usize;
         for l in 0..LANES {
-            reachable |= (lanes >> l) & 1 == 1 && near <= packet.t_max[l];
-        }
-        if !reachable {
-            continue;
-        }
-        let node = &bvh.nodes[index as usize];
-        let present = present_children(node);
-        let (hit_lanes, near) = packet.test_node(&DecodedNode::new(node), lanes);
-        let mut children: [(u32, LaneMask, f32); 8] = [(0, 0, 0.0); 8];
-        let mut count = 0;
-        for c in 0..8 {
-            let hit = hit_lanes[c];
-            if (present >> c) & 1 == 0 || hit == 0 {
-                continue;
-            }
-            if node.is_leaf(c) {
-                let (first, n) = node.child_primitives(c);
-                for slot in first..first + n {
-                    let lanes = hit & alive;
-                    if lanes != 0 {
-                        alive &= !leaf(packet, lanes, slot as usize);
-                    }
-                }
-            } else {
-                children[count] = (node.child_node_index(c), hit, near[c]);
-                count += 1;
-            }
-        }
-        // Push far to near, so the nearest child is popped first.
-        children[..count].sort_unstable_by(|a, b| b.2.total_cmp(&a.2));
-        for &child in &children[..count] {
-            // Trees up to 32 levels deep fit the fixed stack (at most
-            // 7 * 32 + 1 entries are pending); deeper ones, which only
-            // degenerate input produces, spill to the heap. obvhs checks
-            // depth in debug builds only.
-            if top < STACK {
-                stack[top].write(child);
-            } else {
-                spill.push(child);
-            }
-            top += 1;
+            lanes.o_near[a][l] = node_rays[l].o_near[a];
+            lanes.o_far[a][l] = node_rays[l].o_far[a];
+            lanes.inv[a][l] = node_rays[l].inv[a];
         }
     }
+    let mut stack: Vec<Pending> = Vec::with_capacity(64);
+    stack.push((0, alive, f32::NEG_INFINITY));
+    while let Some((cur, lanes_in, near)) = stack.pop() {
+        // Lanes still alive whose closest hit is not nearer than the node.
+        let mut go = 0;
+        for l in 0..LANES {
+            go |= ((near <= packet.t_max[l]) as u32) << l;
+        }
+        let go = go & lanes_in & alive;
+        if go == 0 {
+            continue;
+        }
+        if cur & LEAF != 0 {
+            alive &= !leaf(packet, go, cur & !LEAF);
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        if go.count_ones() <= DIVERGED {
+            for_each_lane(go, |l| {
+                if single_lane::<AVX>(bvh, cur, &node_rays[l], packet, l, &mut leaf) {
+                    alive &= !(1 << l);
+                }
+            });
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        let node: &Node8 = &bvh.nodes[cur as usize];
+        let mut found: [Pending; WIDTH] = [(0, 0, 0.0); WIDTH];
+        let mut n = 0;
+        for c in 0..WIDTH {
+            let child = node.child[c];
+            if child == EMPTY {
+                break;
+            }
+            let (hit, t) = test_child::<AVX>(&lanes, node, c, packet, go);
+            if hit == 0 {
+                continue;
+            }
+            // Insertion, far to near.
+            let mut j = n;
+            while j > 0 && found[j - 1].2 < t {
+                found[j] = found[j - 1];
+                j -= 1;
+            }
+            found[j] = (child, hit, t);
+            n += 1;
+        }
+        stack.extend_from_slice(&found[..n]);
+    }
+}
+
+/// Child `c` of `node` against the lanes: the lanes in `go` that enter
+/// it, and their smallest entry distance (the two code paths as
+/// [`NodeRay::test`]).
+#[inline(always)]
+fn test_child<const AVX: bool>(
+    lanes: &Lanes,
+    node: &Node8,
+    c: usize,
+    packet: &Packet,
+    go: LaneMask,
+) -> (LaneMask, f32) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: `AVX` is set only by the AVX2 entry points, which run
+        // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
+        #[allow(unsafe_code)]
+        return unsafe { test_child_avx2(lanes, node, c, packet, go) };
+    }
+    let mut enter = [
+        Vec4::from_slice(&packet.t_min[..4]),
+        Vec4::from_slice(&packet.t_min[4..]),
+    ];
+    let mut exit = [
+        Vec4::from_slice(&packet.t_max[..4]),
+        Vec4::from_slice(&packet.t_max[4..]),
+    ];
+    for a in 0..3 {
+        let n = lanes.near[a];
+        let near = Vec4::splat(node.planes[n][c]);
+        let far = Vec4::splat(node.planes[(n + 3) % 6][c]);
+        for k in 0..2 {
+            let on = Vec4::from_slice(&lanes.o_near[a][4 * k..4 * k + 4]);
+            let of = Vec4::from_slice(&lanes.o_far[a][4 * k..4 * k + 4]);
+            let inv = Vec4::from_slice(&lanes.inv[a][4 * k..4 * k + 4]);
+            enter[k] = max4((near - on) * inv, enter[k]);
+            exit[k] = min4((far - of) * inv, exit[k]);
+        }
+    }
+    let hit = (enter[0].cmple(exit[0]).bitmask() | enter[1].cmple(exit[1]).bitmask() << 4) & go;
+    if hit == 0 {
+        return (0, f32::INFINITY);
+    }
+    let e = [enter[0].to_array(), enter[1].to_array()];
+    let mut t = f32::INFINITY;
+    for_each_lane(hit, |l| t = min_keep(e[l / 4][l % 4], t));
+    (hit, t)
+}
+
+/// [`test_child`] in one 8-wide AVX register.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn test_child_avx2(
+    lanes: &Lanes,
+    node: &Node8,
+    c: usize,
+    packet: &Packet,
+    go: LaneMask,
+) -> (LaneMask, f32) {
+    use std::arch::x86_64::*;
+    let mut enter: __m256 = bytemuck::cast(packet.t_min);
+    let mut exit: __m256 = bytemuck::cast(packet.t_max);
+    for a in 0..3 {
+        let n = lanes.near[a];
+        let near = _mm256_set1_ps(node.planes[n][c]);
+        let far = _mm256_set1_ps(node.planes[(n + 3) % 6][c]);
+        let on: __m256 = bytemuck::cast(lanes.o_near[a]);
+        let of: __m256 = bytemuck::cast(lanes.o_far[a]);
+        let inv: __m256 = bytemuck::cast(lanes.inv[a]);
+        enter = _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(near, on), inv), enter);
+        exit = _mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(far, of), inv), exit);
+    }
+    let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32 & go;
+    if hit == 0 {
+        return (0, f32::INFINITY);
+    }
+    let e: [f32; LANES] = bytemuck::cast(enter);
+    let mut t = f32::INFINITY;
+    for_each_lane(hit, |l| t = min_keep(e[l], t));
+    (hit, t)
+}
+
+/// Lane `l` alone through the subtree at `start`; returns whether it was
+/// retired (blocked, for occlusion queries).
+#[inline(always)]
+fn single_lane<const AVX: bool>(
+    bvh: &Bvh8,
+    start: u32,
+    ray: &NodeRay,
+    packet: &mut Packet,
+    l: usize,
+    leaf: &mut impl FnMut(&mut Packet, LaneMask, u32) -> LaneMask,
+) -> bool {
+    let mut retired = false;
+    let (t_min, t_max) = (packet.t_min[l], packet.t_max[l]);
+    traverse_from::<AVX>(bvh, start, ray, t_min, t_max, false, |leaf_index, _| {
+        let before = packet.t_max[l];
+        if leaf(packet, 1 << l, leaf_index) != 0 {
+            retired = true;
+            // Nothing is nearer than this: the traversal ends.
+            return Some(f32::NEG_INFINITY);
+        }
+        (packet.t_max[l] < before).then_some(packet.t_max[l])
+    });
+    retired
 }
 
 /// Calls `f` for every lane in `mask`, lowest first.
@@ -212,43 +307,39 @@ pub fn for_each_lane(mut mask: LaneMask, mut f: impl FnMut(usize)) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn bit_matrix_transpose() {
-        let mut s = 99u64;
-        for _ in 0..100 {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let t = transpose8x8(s);
-            for i in 0..8 {
-                for j in 0..8 {
-                    assert_eq!((s >> (8 * i + j)) & 1, (t >> (8 * j + i)) & 1);
-                }
-            }
-        }
-    }
+    use obvhs::aabb::Aabb;
 
     #[test]
     fn lanes_enter_the_children_their_rays_pass_through() {
-        use crate::accel::build::{BuildQuality, build_bvh};
-        use obvhs::aabb::Aabb;
         // Two unit boxes on the x axis, at x = 0 and x = 10.
         let boxes = [
             Aabb::new(Vec3A::splat(-0.5), Vec3A::splat(0.5)),
             Aabb::new(Vec3A::new(9.5, -0.5, -0.5), Vec3A::new(10.5, 0.5, 0.5)),
         ];
-        let bvh = build_bvh(&boxes, BuildQuality::Medium);
+        let bvh = Bvh8::build(&boxes, obvhs::BvhBuildParams::medium_build(), 1);
+        // All in one octant: the packet path. Lane 3 runs parallel to x.
         let rays = [
-            Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::Z),
-            Ray::new(Vec3A::new(3.0, 0.0, -5.0), Vec3A::Z),
-            Ray::new(Vec3A::new(10.0, 0.2, 5.0), -Vec3A::Z),
-            Ray::new(Vec3A::new(0.0, -0.0, -5.0), Vec3A::new(-0.0, 0.0, 1.0)),
+            Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
+            Ray::new(Vec3A::new(3.0, 0.0, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
+            Ray::new(Vec3A::new(10.0, 0.2, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
+            Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
         ];
         let mut p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
         let mut reached = [0 as LaneMask; 2];
-        traverse(&bvh, &mut p, ALL_LANES, |_, lanes, slot| {
-            reached[bvh.primitive_indices[slot] as usize] |= lanes;
+        traverse::<false>(&bvh, &mut p, ALL_LANES, |_, lanes, leaf| {
+            let l = bvh.leaves[leaf as usize];
+            reached[bvh.prims[l.first as usize] as usize] |= lanes;
+            0
+        });
+        assert_eq!(reached, [0b1001, 0b0100]);
+        // Mixed octants: ray by ray, same answer.
+        let mut rays = rays;
+        rays[2] = Ray::new(Vec3A::new(10.0, 0.2, 5.0), -Vec3A::Z);
+        let mut p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
+        let mut reached = [0 as LaneMask; 2];
+        traverse::<false>(&bvh, &mut p, ALL_LANES, |_, lanes, leaf| {
+            let l = bvh.leaves[leaf as usize];
+            reached[bvh.prims[l.first as usize] as usize] |= lanes;
             0
         });
         assert_eq!(reached, [0b1001, 0b0100]);

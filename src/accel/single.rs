@@ -1,169 +1,242 @@
-//! Single-ray traversal of obvhs's CWBVH with Prism's node test, in
-//! obvhs's ordered (octant-sorted) visiting order.
+//! Single-ray traversal of a [`Bvh8`]: nearest child first, with entry
+//! distances on the stack so that subtrees made stale by a closer hit are
+//! dropped without being tested.
 
-use glam::UVec2;
-use obvhs::cwbvh::CwBvh;
-use obvhs::cwbvh::node::{CwBvhNode, extract_byte64};
-use obvhs::faststack::{FastStack, StackStack};
-
-use crate::accel::node::{DecodedNode, NodeRay};
+use crate::accel::bvh8::{Bvh8, LEAF};
+use crate::accel::node::NodeRay;
 use crate::core::math::Ray;
 
-/// Pending node groups of one traversal: obvhs's fixed stack, spilling to
-/// the heap past its capacity. obvhs's own stack overwrites its last entry
-/// when full (its depth check runs in debug builds only), which would
-/// silently lose subtrees of a tree deeper than 32 levels; such trees
-/// come from degenerate input (see the deep-tree test in `geometry::mesh`). A `Vec` allocates
-/// nothing until it is pushed to, so shallow trees pay one comparison.
-#[derive(Default)]
-struct SpillStack {
-    fixed: StackStack<UVec2, 32>,
-    heap: Vec<UVec2>,
-}
+/// Entries held without allocating; deeper traversals spill to the heap.
+const FIXED: usize = 32;
 
-/// Entries `StackStack<_, 32>` holds before it starts overwriting.
-const FIXED_CAPACITY: usize = 31;
-
-impl FastStack<UVec2> for SpillStack {
-    #[inline(always)]
-    fn push(&mut self, v: UVec2) {
-        // The heap holds entries only while the fixed part is full.
-        if self.fixed.len() < FIXED_CAPACITY {
-            self.fixed.push(v);
-        } else {
-            self.heap.push(v);
-        }
-    }
-    #[inline(always)]
-    fn pop_fast(&mut self) -> UVec2 {
-        if self.heap.is_empty() {
-            self.fixed.pop_fast()
-        } else {
-            self.heap.pop().unwrap_or_default()
-        }
-    }
-    #[inline(always)]
-    fn pop(&mut self) -> Option<UVec2> {
-        self.heap.pop().or_else(|| self.fixed.pop())
-    }
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.fixed.len() + self.heap.len()
-    }
-    #[inline(always)]
-    fn is_empty(&self) -> bool {
-        self.heap.is_empty() && self.fixed.is_empty()
-    }
-    #[inline(always)]
-    fn clear(&mut self) {
-        self.fixed.clear();
-        self.heap.clear();
-    }
-}
-
-/// The state `obvhs::traverse!` reads and writes, with a stack of any
-/// depth.
-struct Walk {
-    stack: SpillStack,
-    current_group: UVec2,
-    primitive_group: UVec2,
-    oct_inv4: u32,
-    primitive_id: u32,
-    hitmask: u32,
-}
-
-/// Conservative test of the eight children of `node`; returns the hit
-/// mask in obvhs's encoding.
+/// Pending subtrees: `entry distance bits << 32 | child reference`.
 ///
-/// The eight children are tested as two groups of four in SIMD registers
-/// (`glam::Vec4`) rather than one child at a time (measured: see the
-/// README's measurement notes).
+/// At most seven entries per level are pending, and nearest-first
+/// traversal rarely holds more than a few; deeper stacks (large or
+/// degenerate input, see the deep-tree test in `geometry::mesh`) spill to
+/// a `Vec`, which allocates only when first pushed to. (A small fixed part
+/// is zeroed with a few stores rather than a `memset` call per ray.)
+pub(crate) struct Stack {
+    fixed: [u64; FIXED],
+    len: usize,
+    spill: Vec<u64>,
+}
+
+impl Stack {
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self {
+            fixed: [0; FIXED],
+            len: 0,
+            spill: Vec::new(),
+        }
+    }
+
+    /// The fixed part changes only while the spill is empty, so entries
+    /// come back last in, first out.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, v: u64) {
+        if self.len < FIXED {
+            self.fixed[self.len] = v;
+            self.len += 1;
+        } else {
+            self.push_spill(v);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn push_spill(&mut self, v: u64) {
+        self.spill.push(v);
+    }
+
+    #[inline(always)]
+    pub(crate) fn pop(&mut self) -> Option<u64> {
+        if !self.spill.is_empty() {
+            return self.spill.pop();
+        }
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        Some(self.fixed[self.len])
+    }
+}
+
+/// A stack entry.
 #[inline(always)]
-fn intersect_node(node: &CwBvhNode, ray: &NodeRay, t_min: f32, t_max: f32, oct_inv4: u32) -> u32 {
-    let (mut hits, _) = DecodedNode::new(node).test(ray, t_min, t_max);
-    if hits == 0 {
-        return 0;
-    }
-    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-    let mut hit_mask = 0;
-    while hits != 0 {
-        let c = hits.trailing_zeros() as usize;
-        hits &= hits - 1;
-        hit_mask |= extract_byte64(child_bits8, c) << extract_byte64(bit_index8, c);
-    }
-    hit_mask
+pub(crate) fn entry(t: f32, child: u32) -> u64 {
+    ((t.to_bits() as u64) << 32) | child as u64
 }
 
-/// Traverses `bvh` with a conservative node test (see [`crate::accel::node::NODE_MARGIN_EPS`]).
+/// The entry distance and child of a stack entry.
+#[inline(always)]
+pub(crate) fn unpack(e: u64) -> (f32, u32) {
+    (f32::from_bits((e >> 32) as u32), e as u32)
+}
+
+/// Traverses `bvh` from node `start` with `ray` (prepared for `bvh`),
+/// searching `(t_min, t_max)`.
 ///
-/// `visit(slot, t_max)` tests the primitive in leaf slot `slot` (an index
-/// into `bvh.primitive_indices`) and returns the `t` of a hit inside
-/// `(t_min, t_max)`, which then shrinks `t_max`. With `stop_at_first` the
+/// `visit(leaf, t_max)` tests the primitives of leaf `leaf` (an index
+/// into [`Bvh8::leaves`]) and returns the `t` of the nearest hit inside
+/// `(t_min, t_max)`, which then shrinks `t_max`. With `any_hit` the
 /// traversal ends at the first hit (shadow rays). Returns whether any
 /// primitive was hit.
 ///
-/// Used for every mesh; the top-level BVH can use it the same way.
-pub fn traverse_bvh(
-    bvh: &CwBvh,
+/// At each node the entered children are sorted by entry distance; the
+/// nearest is visited next and the others are stacked with their
+/// distances, so a popped entry farther than the closest hit found since
+/// is dropped.
+#[inline(always)]
+pub fn traverse_from<const AVX: bool>(
+    bvh: &Bvh8,
+    start: u32,
+    ray: &NodeRay,
+    t_min: f32,
+    mut t_max: f32,
+    any_hit: bool,
+    mut visit: impl FnMut(u32, f32) -> Option<f32>,
+) -> bool {
+    if bvh.nodes.is_empty() {
+        return false;
+    }
+    let mut stack = Stack::new();
+    let mut any = false;
+    let mut cur = start;
+    loop {
+        if cur & LEAF == 0 {
+            let node = &bvh.nodes[cur as usize];
+            let (mask, enter) = ray.test::<AVX>(node, t_min, t_max);
+            if mask != 0 {
+                let first = mask.trailing_zeros() as usize;
+                let rest = mask & (mask - 1);
+                if rest == 0 {
+                    cur = node.child[first];
+                    continue;
+                }
+                let second = rest.trailing_zeros() as usize;
+                if rest & (rest - 1) == 0 {
+                    // Two children: the farther one waits.
+                    let (a, b) = (
+                        (enter[first], node.child[first]),
+                        (enter[second], node.child[second]),
+                    );
+                    let (near, far) = if b.0 < a.0 { (b, a) } else { (a, b) };
+                    stack.push(entry(far.0, far.1));
+                    cur = near.1;
+                    continue;
+                }
+                // Three or more: sort far to near (insertion sort of at
+                // most eight), stack all but the nearest.
+                let mut buf = [(0.0f32, 0u32); 8];
+                let mut n = 0;
+                let mut m = mask;
+                while m != 0 {
+                    let c = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let item = (enter[c], node.child[c]);
+                    let mut j = n;
+                    while j > 0 && buf[j - 1].0 < item.0 {
+                        buf[j] = buf[j - 1];
+                        j -= 1;
+                    }
+                    buf[j] = item;
+                    n += 1;
+                }
+                for &(t, c) in &buf[..n - 1] {
+                    stack.push(entry(t, c));
+                }
+                cur = buf[n - 1].1;
+                continue;
+            }
+        } else if let Some(t) = visit(cur & !LEAF, t_max) {
+            any = true;
+            if any_hit {
+                return true;
+            }
+            t_max = t_max.min(t);
+        }
+        // Next pending subtree that a hit has not made stale.
+        loop {
+            let Some(e) = stack.pop() else {
+                return any;
+            };
+            let (t, c) = unpack(e);
+            if t <= t_max {
+                cur = c;
+                break;
+            }
+        }
+    }
+}
+
+/// [`traverse_from`] from the root, preparing `ray` for `bvh`.
+#[inline(always)]
+pub fn traverse<const AVX: bool>(
+    bvh: &Bvh8,
     ray: &Ray,
     t_min: f32,
     t_max: f32,
-    stop_at_first: bool,
+    any_hit: bool,
+    visit: impl FnMut(u32, f32) -> Option<f32>,
+) -> bool {
+    let node_ray = NodeRay::new(ray, bvh);
+    traverse_from::<AVX>(bvh, 0, &node_ray, t_min, t_max, any_hit, visit)
+}
+
+/// [`traverse`] with a visitor per primitive: `visit(slot, t_max)` tests
+/// the primitive at `bvh.prims[slot]` (leaves' primitives in order).
+#[inline(always)]
+pub fn traverse_bvh<const AVX: bool>(
+    bvh: &Bvh8,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    any_hit: bool,
     mut visit: impl FnMut(usize, f32) -> Option<f32>,
 ) -> bool {
-    let node_ray = NodeRay::new(ray);
-    let mut t_max = t_max;
-    let mut any = false;
-    let start = bvh.new_traversal(ray.direction);
-    let mut state = Walk {
-        // obvhs's empty fixed stack, with a heap part behind it.
-        stack: SpillStack {
-            fixed: start.stack,
-            heap: Vec::new(),
-        },
-        current_group: start.current_group,
-        primitive_group: start.primitive_group,
-        oct_inv4: start.oct_inv4,
-        primitive_id: 0,
-        hitmask: 0,
-    };
-    let mut node;
-    'traversal: {
-        obvhs::traverse!(
-            bvh,
-            node,
-            state,
-            intersect_node(node, &node_ray, t_min, t_max, state.oct_inv4),
-            {
-                if let Some(t) = visit(state.primitive_id as usize, t_max) {
-                    any = true;
-                    if stop_at_first {
-                        break 'traversal;
-                    }
-                    t_max = t_max.min(t);
+    traverse::<AVX>(bvh, ray, t_min, t_max, any_hit, |leaf, mut t_max| {
+        let l = bvh.leaves[leaf as usize];
+        let mut best = None;
+        for slot in l.first..l.first + l.count {
+            if let Some(t) = visit(slot as usize, t_max) {
+                if any_hit {
+                    return Some(t);
                 }
+                t_max = t_max.min(t);
+                best = Some(t_max);
             }
-        );
-    }
-    any
+        }
+        best
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// obvhs's fixed stack overwrites its last entry past 31; the spill
-    /// stack must give back every entry, last in first out.
+    /// The stack gives back every entry, last in first out, past its
+    /// fixed part.
     #[test]
-    fn spill_stack_keeps_every_entry() {
-        let mut s = SpillStack::default();
-        for i in 0..100 {
-            s.push(UVec2::new(i, 0));
+    fn stack_keeps_every_entry() {
+        let mut s = Stack::new();
+        for i in 0..200u32 {
+            s.push(entry(i as f32, i));
         }
-        assert_eq!(s.len(), 100);
-        for i in (0..100).rev() {
-            assert_eq!(s.pop_fast(), UVec2::new(i, 0));
+        for i in (0..200u32).rev() {
+            assert_eq!(unpack(s.pop().unwrap()), (i as f32, i));
         }
-        assert!(s.is_empty());
+        assert!(s.pop().is_none());
+        // Interleaved pushes and pops across the boundary.
+        for i in 0..70u32 {
+            s.push(entry(0.0, i));
+        }
+        assert_eq!(unpack(s.pop().unwrap()).1, 69);
+        s.push(entry(0.0, 1000));
+        assert_eq!(unpack(s.pop().unwrap()).1, 1000);
+        for i in (0..69u32).rev() {
+            assert_eq!(unpack(s.pop().unwrap()).1, i);
+        }
     }
 }

@@ -1,7 +1,7 @@
-//! Stream traversal of obvhs's CWBVH: a whole set of rays (the wavefront's
+//! Stream traversal of a [`Bvh8`]: a whole set of rays (the wavefront's
 //! rays that reach one mesh) descends the tree together.
 //!
-//! Each node is decoded once per visit and tested against every ray of
+//! Each node is read once per visit and tested against every ray of
 //! the stream that reached it; the rays that enter each child are written
 //! to that child's own list, so a child is visited once for all of its
 //! rays instead of once per ray. The box test per ray is the same
@@ -23,9 +23,9 @@
 //! [`crate::accel::packet`].
 
 use glam::Vec3A;
-use obvhs::cwbvh::CwBvh;
 
-use crate::accel::node::{DecodedNode, NodeRay, present_children};
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, WIDTH};
+use crate::accel::node::NodeRay;
 use crate::core::math::Ray;
 
 /// A stream of rays (per ray: origin, reciprocal direction and search
@@ -33,7 +33,8 @@ use crate::core::math::Ray;
 /// so nothing is allocated per ray once it has grown.
 #[derive(Clone, Debug, Default)]
 pub struct Stream {
-    /// Per ray: the ray prepared for the node test.
+    /// Per ray: the ray prepared for the node test of the tree being
+    /// traversed.
     node_rays: Vec<NodeRay>,
     /// Sum of the ray directions (child visiting order).
     direction_sum: Vec3A,
@@ -83,7 +84,6 @@ impl Stream {
 
     /// Adds `ray`, searched in `(t_min, t_max)`.
     pub fn push(&mut self, ray: Ray, t_min: f32, t_max: f32) {
-        self.node_rays.push(NodeRay::new(&ray));
         self.direction_sum += ray.direction;
         self.rays.push(ray);
         self.t_min.push(t_min);
@@ -94,19 +94,23 @@ impl Stream {
 /// Traverses `bvh` with every ray of `stream` (closest-hit order per
 /// stream, see the module documentation).
 ///
-/// `leaf(slot, ids, stream)` tests the primitive in leaf slot `slot` (an
-/// index into `bvh.primitive_indices`) against the rays `ids` of the
-/// stream that reach its leaf, and shrinks their `t_max` on hits, which
-/// prunes the rest of their traversal.
-pub fn traverse(
-    bvh: &CwBvh,
+/// `leaf(leaf, ids, stream)` tests the primitives of leaf `leaf` (an
+/// index into [`Bvh8::leaves`]) against the rays `ids` of the stream that
+/// reach it, and shrinks their `t_max` on hits, which prunes the rest of
+/// their traversal.
+#[inline(always)]
+pub fn traverse<const AVX: bool>(
+    bvh: &Bvh8,
     stream: &mut Stream,
-    mut leaf: impl FnMut(usize, &[u32], &mut Stream),
+    mut leaf: impl FnMut(u32, &[u32], &mut Stream),
 ) {
     let n = stream.len();
     if bvh.nodes.is_empty() || n == 0 {
         return;
     }
+    let mut node_rays = std::mem::take(&mut stream.node_rays);
+    node_rays.clear();
+    node_rays.extend(stream.rays.iter().map(|r| NodeRay::new(r, bvh)));
     let mut ids = std::mem::take(&mut stream.ids);
     let mut stack = std::mem::take(&mut stream.stack);
     let mut masks = std::mem::take(&mut stream.masks);
@@ -120,17 +124,14 @@ pub fn traverse(
         // Lists above this one belong to nodes already visited.
         ids.truncate(start + len);
         let node = &bvh.nodes[index as usize];
-        let decoded = DecodedNode::new(node);
-        let present = present_children(node);
         masks.clear();
         masks.extend(ids[start..start + len].iter().map(|&r| {
             let r = r as usize;
-            let (hits, _) = decoded.test(&stream.node_rays[r], stream.t_min[r], stream.t_max[r]);
+            let (hits, _) = node_rays[r].test::<AVX>(node, stream.t_min[r], stream.t_max[r]);
             hits as u8
         }));
-        let mut counts = [0u32; 8];
-        for m in masks.iter_mut() {
-            *m &= present as u8;
+        let mut counts = [0u32; WIDTH];
+        for m in masks.iter() {
             let mut b = *m as u32;
             while b != 0 {
                 counts[b.trailing_zeros() as usize] += 1;
@@ -138,32 +139,34 @@ pub fn traverse(
             }
         }
         // Children nearest first along the stream's direction.
-        let mut order = [0u8; 8];
-        let mut key = [0f32; 8];
+        let mut order = [0u8; WIDTH];
+        let mut key = [0f32; WIDTH];
         let mut count = 0;
-        for c in 0..8 {
-            if counts[c] == 0 {
+        for c in 0..WIDTH {
+            if counts[c] == 0 || node.child[c] == EMPTY {
                 continue;
             }
-            key[c] = decoded.child_centre2(c).dot(dir);
+            let (lo, hi) = node.child_box(c);
+            key[c] = (lo + hi).dot(dir);
             order[count] = c as u8;
             count += 1;
         }
         order[..count].sort_unstable_by(|&a, &b| key[a as usize].total_cmp(&key[b as usize]));
+        let is_leaf = |c: u8| node.child[c as usize] & LEAF != 0;
         // Every child's ray list, in one pass.
         let base = ids.len();
         // Regions in stack order: inner children farthest first, so a
         // popped node's list is the last pending one; then the leaves.
-        let mut offset = [0usize; 8];
+        let mut offset = [0usize; WIDTH];
         let mut total = base;
         for &c in order[..count].iter().rev() {
-            if !node.is_leaf(c as usize) {
+            if !is_leaf(c) {
                 offset[c as usize] = total;
                 total += counts[c as usize] as usize;
             }
         }
         for &c in &order[..count] {
-            if node.is_leaf(c as usize) {
+            if is_leaf(c) {
                 offset[c as usize] = total;
                 total += counts[c as usize] as usize;
             }
@@ -182,27 +185,25 @@ pub fn traverse(
         // Leaves first, nearest first: their hits shrink the intervals
         // before the inner children are visited.
         for &c in &order[..count] {
-            let c = c as usize;
-            if !node.is_leaf(c) {
+            if !is_leaf(c) {
                 continue;
             }
+            let c = c as usize;
             let list = offset[c] - counts[c] as usize..offset[c];
-            let (first, prims) = node.child_primitives(c);
-            for slot in first..first + prims {
-                leaf(slot as usize, &ids[list.clone()], stream);
-            }
+            leaf(node.child[c] & !LEAF, &ids[list], stream);
         }
         // Inner children, pushed farthest first so the nearest is popped
         // first.
         for &c in order[..count].iter().rev() {
-            let c = c as usize;
-            if node.is_leaf(c) {
+            if is_leaf(c) {
                 continue;
             }
+            let c = c as usize;
             let from = offset[c] - counts[c] as usize;
-            stack.push((node.child_node_index(c), from as u32, counts[c]));
+            stack.push((node.child[c], from as u32, counts[c]));
         }
     }
+    stream.node_rays = node_rays;
     stream.ids = ids;
     stream.stack = stack;
     stream.masks = masks;

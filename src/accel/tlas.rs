@@ -3,11 +3,10 @@
 //!
 //! The source of truth is an obvhs [`Bvh2`] with one instance per leaf:
 //! it is the only obvhs BVH that supports insertion, removal and moving of
-//! leaves. Traversal uses a [`CwBvh`] converted from it after each batch of
-//! changes (see `Tlas::commit`): conversion is linear in the number of
-//! instances, needs no sort, and keeps every traversal path (single rays,
-//! packets, the conservative node test of [`crate::accel::single::traverse_bvh`])
-//! unchanged.
+//! leaves. Traversal uses a [`Bvh8`] collapsed from it after each batch of
+//! changes (see `Tlas::commit`): collapsing is linear in the number of
+//! instances, needs no sort, and gives the top level the same node layout
+//! and traversals (single rays, packets, streams) as meshes.
 //!
 //! Every instance has a *key*: its primitive id in the [`Bvh2`]. Keys stay
 //! put when instances are swap-removed, so a removal touches one leaf.
@@ -20,18 +19,17 @@ use std::time::Instant;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
-use obvhs::cwbvh::CwBvh;
-use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::PlocBuilder;
 
-use crate::accel::build::{BuildQuality, build_bvh, cwbvh_depth};
+use crate::accel::build::BuildQuality;
+use crate::accel::bvh8::Bvh8;
 
 const NONE: u32 = u32::MAX;
 
-/// Deepest CwBvh accepted after incremental updates; deeper trees are
-/// rebuilt (traversal handles any depth, but a tree this deep has lost
-/// its quality).
-const MAX_CWBVH_DEPTH: usize = 32;
+/// Deepest traversal tree accepted after incremental updates; deeper
+/// trees are rebuilt (traversal handles any depth, but a tree this deep
+/// has lost its quality).
+const MAX_DEPTH: usize = 32;
 
 /// How a moved instance's leaf is updated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -99,7 +97,7 @@ pub struct TlasCounters {
     pub inserts: u64,
     /// Leaves removed.
     pub removes: u64,
-    /// Conversions of the [`Bvh2`] to the traversal [`CwBvh`].
+    /// Conversions of the [`Bvh2`] to the traversal [`Bvh8`].
     pub conversions: u64,
 }
 
@@ -118,9 +116,9 @@ pub enum TlasUpdate {
 /// The top-level acceleration structure of a [`crate::scene::RenderScene`].
 pub struct Tlas {
     bvh2: Bvh2,
-    /// Traversal BVH; its `primitive_indices` are keys.
-    pub(crate) cw: CwBvh,
-    /// Instance index per CwBvh leaf slot.
+    /// Traversal BVH; its `prims` are keys.
+    pub(crate) bvh: Bvh8,
+    /// Instance index per traversal leaf slot (position in `bvh.prims`).
     pub(crate) leaf_instances: Vec<u32>,
     /// Instances without bounds (infinite planes, huge objects), tested
     /// one by one.
@@ -150,7 +148,7 @@ impl std::fmt::Debug for Tlas {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Tlas")
             .field("bvh2_nodes", &self.bvh2.nodes.len())
-            .field("cwbvh_nodes", &self.cw.nodes.len())
+            .field("bvh8_nodes", &self.bvh.nodes.len())
             .field("leaves", &self.leaf_instances.len())
             .field("unbounded", &self.unbounded)
             .field("policy", &self.policy)
@@ -181,7 +179,7 @@ impl Tlas {
     ) -> Self {
         let mut tlas = Self {
             bvh2: Bvh2::default(),
-            cw: CwBvh::default(),
+            bvh: Bvh8::default(),
             leaf_instances: Vec::new(),
             unbounded: Vec::new(),
             key_instance: Vec::new(),
@@ -247,15 +245,12 @@ impl Tlas {
     }
 
     fn convert(&mut self) {
-        let max_prims = self.quality.params().max_prims_per_leaf.clamp(1, 3);
-        self.cw = if self.bvh2.nodes.is_empty() {
-            build_bvh(&[], self.quality)
-        } else {
-            bvh2_to_cwbvh(&self.bvh2, max_prims, true, false)
-        };
+        // Every Bvh2 leaf holds one instance (PLOC leaves, insertions), so
+        // no leaf is split and no boxes are needed.
+        self.bvh = Bvh8::from_bvh2(&self.bvh2, &[], u32::MAX);
         self.leaf_instances = self
-            .cw
-            .primitive_indices
+            .bvh
+            .prims
             .iter()
             .map(|&k| self.key_instance[k as usize])
             .collect();
@@ -391,7 +386,7 @@ impl Tlas {
             TlasUpdate::Rebuilt
         } else if self.stale {
             self.convert();
-            if cwbvh_depth(&self.cw) > MAX_CWBVH_DEPTH {
+            if self.bvh.depth > MAX_DEPTH {
                 self.rebuild(count, placement);
                 TlasUpdate::Rebuilt
             } else {

@@ -4,15 +4,17 @@
 use std::time::Instant;
 
 use glam::{Vec2, Vec3, Vec3A};
-use obvhs::{aabb::Aabb, cwbvh::CwBvh};
+use obvhs::aabb::Aabb;
 
+use crate::accel::build::padded_aabb;
 /// Re-exported: a mesh is built with one of these presets.
 pub use crate::accel::build::{BuildQuality, MAX_COORDINATE};
-use crate::accel::build::{build_bvh, padded_aabb};
+use crate::accel::bvh8::{Bvh8, MAX_LEAF};
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
-use crate::accel::single::traverse_bvh;
+use crate::accel::single::traverse;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
+use crate::geometry::triangle::Tri4;
 /// Re-exported: the triangle test meshes use.
 pub use crate::geometry::triangle::WatertightRay;
 
@@ -55,7 +57,10 @@ pub struct Mesh {
     triangles: Vec<[u32; 3]>,
     /// Vertex positions per triangle, in BVH order.
     corners: Vec<[Vec3A; 3]>,
-    bvh: CwBvh,
+    bvh: Bvh8,
+    /// The triangles of each BVH leaf side by side (leaf `i` holds
+    /// triangles `bvh.leaves[i].first ..` in BVH order).
+    blocks: Vec<Tri4>,
     bounds: (Vec3A, Vec3A),
     /// Seconds spent building the BVH.
     pub build_seconds: f64,
@@ -167,18 +172,23 @@ impl Mesh {
                 padded_aabb(a.min(b).min(c), a.max(b).max(c))
             })
             .collect();
-        let bvh = build_bvh(&boxes, quality);
+        let bvh = Bvh8::build(&boxes, quality.params(), MAX_LEAF);
         MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let triangles: Vec<[u32; 3]> = bvh
-            .primitive_indices
+            .prims
             .iter()
             .map(|&i| data.indices[i as usize])
             .collect();
-        let build_seconds = start.elapsed().as_secs_f64();
-        let corners = triangles
+        let corners: Vec<[Vec3A; 3]> = triangles
             .iter()
             .map(|t| t.map(|i| positions[i as usize]))
             .collect();
+        let blocks = bvh
+            .leaves
+            .iter()
+            .map(|l| Tri4::new(&corners[l.first as usize..(l.first + l.count) as usize]))
+            .collect();
+        let build_seconds = start.elapsed().as_secs_f64();
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
         for t in &triangles {
@@ -195,6 +205,7 @@ impl Mesh {
             triangles,
             corners,
             bvh,
+            blocks,
             bounds: (lo, hi),
             build_seconds,
         })
@@ -215,20 +226,34 @@ impl Mesh {
         self.corners[i]
     }
 
+    /// The nearest hit in leaf `leaf` inside `(t_min, t_max)`.
+    #[inline(always)]
+    fn leaf_hit(&self, wt: &WatertightRay, leaf: u32, t_min: f32, t_max: f32) -> Option<MeshHit> {
+        let l = self.bvh.leaves[leaf as usize];
+        let (lane, t, b1, b2) =
+            wt.intersect4(&self.blocks[leaf as usize], l.count, t_min, t_max)?;
+        Some(MeshHit {
+            t,
+            triangle: l.first + lane,
+            b1,
+            b2,
+        })
+    }
+
     /// Closest hit with `t` in `(t_min, t_max)`.
-    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit> {
+    #[inline(always)]
+    pub(crate) fn intersect_kernel<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<MeshHit> {
         let wt = WatertightRay::new(ray);
         let mut best: Option<MeshHit> = None;
-        traverse_bvh(&self.bvh, ray, t_min, t_max, false, |id, t_max| {
-            let [p0, p1, p2] = self.corners[id];
-            let (t, b1, b2) = wt.intersect(p0, p1, p2, t_min, t_max)?;
-            best = Some(MeshHit {
-                t,
-                triangle: id as u32,
-                b1,
-                b2,
-            });
-            Some(t)
+        traverse::<AVX>(&self.bvh, ray, t_min, t_max, false, |leaf, t_max| {
+            let hit = self.leaf_hit(&wt, leaf, t_min, t_max)?;
+            best = Some(hit);
+            Some(hit.t)
         });
         best
     }
@@ -236,27 +261,20 @@ impl Mesh {
     /// Closest hits for the lanes of `packet` in `lanes` (rays in object
     /// space), by packet traversal: `best[l]` is replaced when lane `l`
     /// finds a nearer hit than `packet.t_max[l]`, which is shrunk to it.
-    pub fn intersect_packet(
+    #[inline(always)]
+    pub(crate) fn intersect_packet_kernel<const AVX: bool>(
         &self,
         packet: &mut Packet,
         lanes: LaneMask,
         best: &mut [Option<MeshHit>; LANES],
     ) {
-        let mut wt = [None; LANES];
-        for_each_lane(lanes, |l| wt[l] = Some(WatertightRay::new(&packet.rays[l])));
-        crate::accel::packet::traverse(&self.bvh, packet, lanes, |p, hit, slot| {
-            let [p0, p1, p2] = self.corners[slot];
+        let wt: [WatertightRay; LANES] =
+            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
             for_each_lane(hit, |l| {
-                if let Some(w) = &wt[l]
-                    && let Some((t, b1, b2)) = w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l])
-                {
-                    p.t_max[l] = t;
-                    best[l] = Some(MeshHit {
-                        t,
-                        triangle: slot as u32,
-                        b1,
-                        b2,
-                    });
+                if let Some(h) = self.leaf_hit(&wt[l], leaf, p.t_min[l], p.t_max[l]) {
+                    p.t_max[l] = h.t;
+                    best[l] = Some(h);
                 }
             });
             0
@@ -265,16 +283,21 @@ impl Mesh {
 
     /// The lanes of `packet` in `lanes` that hit any triangle within their
     /// intervals; each lane stops at its first blocker.
-    pub fn occluded_packet(&self, packet: &mut Packet, lanes: LaneMask) -> LaneMask {
-        let mut wt = [None; LANES];
-        for_each_lane(lanes, |l| wt[l] = Some(WatertightRay::new(&packet.rays[l])));
+    #[inline(always)]
+    pub(crate) fn occluded_packet_kernel<const AVX: bool>(
+        &self,
+        packet: &mut Packet,
+        lanes: LaneMask,
+    ) -> LaneMask {
+        let wt: [WatertightRay; LANES] =
+            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
         let mut blocked = 0;
-        crate::accel::packet::traverse(&self.bvh, packet, lanes, |p, hit, slot| {
-            let [p0, p1, p2] = self.corners[slot];
+        crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
             let mut now = 0;
             for_each_lane(hit, |l| {
-                if let Some(w) = &wt[l]
-                    && w.intersect(p0, p1, p2, p.t_min[l], p.t_max[l]).is_some()
+                if self
+                    .leaf_hit(&wt[l], leaf, p.t_min[l], p.t_max[l])
+                    .is_some()
                 {
                     now |= 1 << l;
                 }
@@ -289,7 +312,8 @@ impl Mesh {
     /// traversal ([`crate::accel::stream`]): `best[i]` is ray `i`'s nearest hit
     /// inside its interval, as [`Mesh::intersect`] finds it. `wt` is a
     /// reusable buffer.
-    pub fn intersect_stream(
+    #[inline(always)]
+    pub(crate) fn intersect_stream_kernel<const AVX: bool>(
         &self,
         stream: &mut Stream,
         wt: &mut Vec<WatertightRay>,
@@ -299,21 +323,65 @@ impl Mesh {
         wt.extend(stream.rays.iter().map(WatertightRay::new));
         best.clear();
         best.resize(stream.len(), None);
-        crate::accel::stream::traverse(&self.bvh, stream, |slot, ids, s| {
-            let [p0, p1, p2] = self.corners[slot];
+        crate::accel::stream::traverse::<AVX>(&self.bvh, stream, |leaf, ids, s| {
             for &r in ids {
                 let r = r as usize;
-                if let Some((t, b1, b2)) = wt[r].intersect(p0, p1, p2, s.t_min[r], s.t_max[r]) {
-                    s.t_max[r] = t;
-                    best[r] = Some(MeshHit {
-                        t,
-                        triangle: slot as u32,
-                        b1,
-                        b2,
-                    });
+                if let Some(h) = self.leaf_hit(&wt[r], leaf, s.t_min[r], s.t_max[r]) {
+                    s.t_max[r] = h.t;
+                    best[r] = Some(h);
                 }
             }
         });
+    }
+
+    crate::simd_entry! {
+        /// Closest hit with `t` in `(t_min, t_max)`.
+        pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit>
+            => Mesh, intersect_kernel
+    }
+
+    crate::simd_entry! {
+        /// True if any triangle is hit with `t` in `(t_min, t_max)`; stops at
+        /// the first one found.
+        pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool
+            => Mesh, occluded_kernel
+    }
+
+    crate::simd_entry! {
+        /// Closest hits for the lanes of `packet` in `lanes` (rays in object
+        /// space), by packet traversal: `best[l]` is replaced when lane `l`
+        /// finds a nearer hit than `packet.t_max[l]`, which is shrunk to it.
+        pub fn intersect_packet(
+            &self,
+            packet: &mut Packet,
+            lanes: LaneMask,
+            best: &mut [Option<MeshHit>; LANES],
+        ) -> () => Mesh, intersect_packet_kernel
+    }
+
+    crate::simd_entry! {
+        /// The lanes of `packet` in `lanes` that hit any triangle within their
+        /// intervals; each lane stops at its first blocker.
+        pub fn occluded_packet(&self, packet: &mut Packet, lanes: LaneMask) -> LaneMask
+            => Mesh, occluded_packet_kernel
+    }
+
+    crate::simd_entry! {
+        /// Closest hits of every ray of `stream` (object space), by stream
+        /// traversal ([`crate::accel::stream`]): `best[i]` is ray `i`'s nearest
+        /// hit inside its interval, as [`Mesh::intersect`] finds it. `wt` is a
+        /// reusable buffer.
+        pub fn intersect_stream(
+            &self,
+            stream: &mut Stream,
+            wt: &mut Vec<WatertightRay>,
+            best: &mut Vec<Option<MeshHit>>,
+        ) -> () => Mesh, intersect_stream_kernel
+    }
+
+    /// The position of triangle `i` (BVH order) in the input's indices.
+    pub fn input_triangle(&self, i: usize) -> u32 {
+        self.bvh.prims[i]
     }
 
     /// Closest hit by testing every triangle: the reference for BVH tests.
@@ -337,11 +405,16 @@ impl Mesh {
 
     /// True if any triangle is hit with `t` in `(t_min, t_max)`; stops at
     /// the first one found.
-    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    #[inline(always)]
+    pub(crate) fn occluded_kernel<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> bool {
         let wt = WatertightRay::new(ray);
-        traverse_bvh(&self.bvh, ray, t_min, t_max, true, |id, t_max| {
-            let [p0, p1, p2] = self.corners[id];
-            wt.intersect(p0, p1, p2, t_min, t_max).map(|h| h.0)
+        traverse::<AVX>(&self.bvh, ray, t_min, t_max, true, |leaf, t_max| {
+            self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t)
         })
     }
 
@@ -405,12 +478,12 @@ pub fn mesh_bvh_builds() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::build::cwbvh_depth;
 
     /// Small triangles at geometrically growing distances along a line,
     /// from 1e-30 up: each triangle's nearest neighbour is the next
     /// smaller one, and the smallest share one Morton cell, so the builder
-    /// chains them (150 triangles give a tree 58 levels deep).
+    /// chains them (150 triangles give a binary tree 58 levels deep, 15
+    /// levels of 8-wide nodes where a balanced tree would need 3).
     fn deep_soup(n: u32) -> MeshData {
         let mut data = MeshData::default();
         for i in 0..n {
@@ -425,11 +498,10 @@ mod tests {
         data
     }
 
-    /// Trees deeper than 32 levels, which only degenerate input produces
-    /// (obvhs checks depth in debug builds only): every traversal must
-    /// find what brute force finds. This chain-like tree never has more
-    /// than a few groups pending; the stacks' spilling past their fixed
-    /// capacity, which a deep tree with branching needs, is tested in
+    /// Degenerate, chain-like trees, which only degenerate input produces:
+    /// every traversal must find what brute force finds. This tree never
+    /// has more than a few subtrees pending; the stack's spilling past its
+    /// fixed part, which a deep tree with branching needs, is tested in
     /// `accel::single` directly.
     #[test]
     fn deep_trees_are_traversed_completely() {
@@ -440,10 +512,10 @@ mod tests {
             BuildQuality::Medium,
         )
         .unwrap();
-        let depth = cwbvh_depth(&mesh.bvh);
+        let depth = mesh.bvh.depth;
         assert!(
-            depth > 32,
-            "the soup must be deeper than 32 levels, got {depth}"
+            depth > 12,
+            "the soup must be deeper than 12 levels, got {depth}"
         );
         let mut rays = Vec::new();
         let mut s = 7u64;

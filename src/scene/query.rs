@@ -37,21 +37,21 @@ impl StreamScratch {
 }
 
 impl RenderScene {
-    #[inline]
-    fn intersect_instance(
+    #[inline(always)]
+    fn intersect_instance<const AVX: bool>(
         &self,
         index: u32,
         ray: &Ray,
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, LocalHit)> {
-        self.intersect_instance_with(index, ray, t_min, t_max, false)
+        self.intersect_instance_with::<AVX>(index, ray, t_min, t_max, false)
     }
 
     /// Closest hit on one instance; meshes by their BVH, or by testing
     /// every triangle when `brute_force` is set.
-    #[inline]
-    fn intersect_instance_with(
+    #[inline(always)]
+    fn intersect_instance_with<const AVX: bool>(
         &self,
         index: u32,
         ray: &Ray,
@@ -68,36 +68,95 @@ impl RenderScene {
             InstanceGeometry::Mesh(m) => if brute_force {
                 m.intersect_brute_force(&local, t_min, t_max)
             } else {
-                m.intersect(&local, t_min, t_max)
+                m.intersect_kernel::<AVX>(&local, t_min, t_max)
             }
             .map(|h| (h.t, LocalHit::Mesh(h))),
         }
     }
 
-    #[inline]
-    fn occludes_instance(&self, index: u32, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    #[inline(always)]
+    fn occludes_instance<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> bool {
         let inst = &self.instances[index as usize];
         let local = to_object(inst, ray);
         match &inst.geometry {
             InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).is_some(),
-            InstanceGeometry::Mesh(m) => m.occluded(&local, t_min, t_max),
+            InstanceGeometry::Mesh(m) => m.occluded_kernel::<AVX>(&local, t_min, t_max),
         }
     }
 
-    /// The closest hit with `t` in `(t_min, t_max)`.
-    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+    crate::simd_entry! {
+        /// The closest hit with `t` in `(t_min, t_max)`.
+        pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit>
+            => RenderScene, intersect_kernel
+    }
+
+    crate::simd_entry! {
+        /// True when anything blocks the ray between `t_min` and `t_max`;
+        /// stops at the first blocker found.
+        pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool
+            => RenderScene, occluded_kernel
+    }
+
+    crate::simd_entry! {
+        /// [`RenderScene::intersect_packet`], with the top level traversed as
+        /// a packet and each mesh either as a packet (`mesh_packets`) or one
+        /// lane at a time, for rays too incoherent to share a mesh's nodes.
+        pub fn intersect_packet_with(
+            &self,
+            rays: &[Ray],
+            out: &mut [Option<Hit>],
+            mesh_packets: bool,
+        ) -> () => RenderScene, intersect_packet_kernel
+    }
+
+    crate::simd_entry! {
+        /// Closest hits of all `rays` (each searched in `(0, inf)`), by
+        /// streams: the top level is traversed in packets of eight
+        /// consecutive rays, shapes are intersected there, and every ray that
+        /// reaches a mesh instance joins that instance's stream for its
+        /// direction octant; each stream then traverses the mesh's BVH at
+        /// once ([`crate::accel::stream`]). The same hits as
+        /// [`RenderScene::intersect`] on each ray. `scratch` keeps the
+        /// buffers between calls.
+        pub fn intersect_stream(
+            &self,
+            rays: &[Ray],
+            out: &mut [Option<Hit>],
+            scratch: &mut StreamScratch,
+        ) -> () => RenderScene, intersect_stream_kernel
+    }
+
+    crate::simd_entry! {
+        /// [`RenderScene::occluded_packet`], with meshes traversed as a
+        /// packet (`mesh_packets`) or one lane at a time.
+        pub fn occluded_packet_with(
+            &self,
+            rays: &[Ray],
+            t_max: &[f32],
+            mesh_packets: bool,
+        ) -> LaneMask => RenderScene, occluded_packet_kernel
+    }
+
+    #[inline(always)]
+    fn intersect_kernel<const AVX: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
         for &i in &self.tlas.unbounded {
-            if let Some((t, h)) = self.intersect_instance(i, ray, t_min, t_max) {
+            if let Some((t, h)) = self.intersect_instance::<AVX>(i, ray, t_min, t_max) {
                 t_max = t;
                 best = Some((t, i, h));
             }
         }
         if !self.tlas.leaf_instances.is_empty() {
-            traverse_bvh(&self.tlas.cw, ray, t_min, t_max, false, |slot, t_max| {
+            traverse_bvh::<AVX>(&self.tlas.bvh, ray, t_min, t_max, false, |slot, t_max| {
                 let inst = self.tlas.leaf_instances[slot];
-                let (t, h) = self.intersect_instance(inst, ray, t_min, t_max)?;
+                let (t, h) = self.intersect_instance::<AVX>(inst, ray, t_min, t_max)?;
                 best = Some((t, inst, h));
                 Some(t)
             });
@@ -106,22 +165,21 @@ impl RenderScene {
         Some(self.finish_hit(t, index, local))
     }
 
-    /// True when anything blocks the ray between `t_min` and `t_max`; stops
-    /// at the first blocker found.
-    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    #[inline(always)]
+    fn occluded_kernel<const AVX: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         if self
             .tlas
             .unbounded
             .iter()
-            .any(|&i| self.occludes_instance(i, ray, t_min, t_max))
+            .any(|&i| self.occludes_instance::<AVX>(i, ray, t_min, t_max))
         {
             return true;
         }
         if self.tlas.leaf_instances.is_empty() {
             return false;
         }
-        traverse_bvh(&self.tlas.cw, ray, t_min, t_max, true, |slot, t_max| {
-            self.occludes_instance(self.tlas.leaf_instances[slot], ray, t_min, t_max)
+        traverse_bvh::<AVX>(&self.tlas.bvh, ray, t_min, t_max, true, |slot, t_max| {
+            self.occludes_instance::<AVX>(self.tlas.leaf_instances[slot], ray, t_min, t_max)
                 .then_some(t_min)
         })
     }
@@ -138,7 +196,8 @@ impl RenderScene {
     /// level, on the shapes, into `best`. The lanes of `p` that reach mesh
     /// instance `index` go to `mesh(p, lanes, index, instance, mesh, best)`,
     /// which may record hits in `best` and shrink `p.t_max`.
-    fn top_level_packet(
+    #[inline(always)]
+    fn top_level_packet<const AVX: bool>(
         &self,
         rays: &[Ray],
         best: &mut [Option<(f32, u32, LocalHit)>],
@@ -155,47 +214,58 @@ impl RenderScene {
         let mut t_max = [f32::INFINITY; LANES];
         for (l, ray) in rays[..n].iter().enumerate() {
             for &i in &self.tlas.unbounded {
-                if let Some((t, h)) = self.intersect_instance(i, ray, 0.0, t_max[l]) {
+                if let Some((t, h)) = self.intersect_instance::<AVX>(i, ray, 0.0, t_max[l]) {
                     t_max[l] = t;
                     best[l] = Some((t, i, h));
                 }
             }
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
-        packet::traverse(&self.tlas.cw, &mut packet, ALL_LANES, |p, lanes, slot| {
-            let index = self.tlas.leaf_instances[slot];
-            let inst = &self.instances[index as usize];
-            match &inst.geometry {
-                InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
-                    let local = to_object(inst, &p.rays[l]);
-                    if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
-                        p.t_max[l] = h.t;
-                        best[l] = Some((h.t, index, LocalHit::shape(&h)));
-                    }
-                }),
-                InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
+        let bvh = &self.tlas.bvh;
+        packet::traverse::<AVX>(bvh, &mut packet, ALL_LANES, |p, lanes, leaf| {
+            let lf = bvh.leaves[leaf as usize];
+            for slot in lf.first..lf.first + lf.count {
+                let index = self.tlas.leaf_instances[slot as usize];
+                let inst = &self.instances[index as usize];
+                match &inst.geometry {
+                    InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
+                        let local = to_object(inst, &p.rays[l]);
+                        if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
+                            p.t_max[l] = h.t;
+                            best[l] = Some((h.t, index, LocalHit::shape(&h)));
+                        }
+                    }),
+                    InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
+                }
             }
             0
         });
     }
 
-    /// [`RenderScene::intersect_packet`], with the top level traversed as a
-    /// packet and each mesh either as a packet (`mesh_packets`) or one lane
-    /// at a time, for rays too incoherent to share a mesh's nodes.
-    pub fn intersect_packet_with(&self, rays: &[Ray], out: &mut [Option<Hit>], mesh_packets: bool) {
+    #[inline(always)]
+    fn intersect_packet_kernel<const AVX: bool>(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+        mesh_packets: bool,
+    ) {
         let n = rays.len().min(LANES);
         let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
-        self.top_level_packet(rays, &mut best, |p, lanes, index, inst, m, best| {
+        self.top_level_packet::<AVX>(rays, &mut best, |p, lanes, index, inst, m, best| {
             let mut hits = [None; LANES];
             if mesh_packets {
                 let mut local = Packet::new(&[], &[], &[]);
                 for_each_lane(lanes, |l| {
                     local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
                 });
-                m.intersect_packet(&mut local, lanes, &mut hits);
+                m.intersect_packet_kernel::<AVX>(&mut local, lanes, &mut hits);
             } else {
                 for_each_lane(lanes, |l| {
-                    hits[l] = m.intersect(&to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]);
+                    hits[l] = m.intersect_kernel::<AVX>(
+                        &to_object(inst, &p.rays[l]),
+                        p.t_min[l],
+                        p.t_max[l],
+                    );
                 });
             }
             for_each_lane(lanes, |l| {
@@ -210,14 +280,8 @@ impl RenderScene {
         }
     }
 
-    /// Closest hits of all `rays` (each searched in `(0, inf)`), by
-    /// streams: the top level is traversed in packets of eight
-    /// consecutive rays, shapes are intersected there, and every ray that
-    /// reaches a mesh instance joins that instance's stream for its
-    /// direction octant; each stream then traverses the mesh's BVH at once
-    /// ([`crate::accel::stream`]). The same hits as [`RenderScene::intersect`] on
-    /// each ray. `scratch` keeps the buffers between calls.
-    pub fn intersect_stream(
+    #[inline(always)]
+    fn intersect_stream_kernel<const AVX: bool>(
         &self,
         rays: &[Ray],
         out: &mut [Option<Hit>],
@@ -241,7 +305,7 @@ impl RenderScene {
         for (p, packet_rays) in rays.chunks(LANES).enumerate() {
             let first = p * LANES;
             let best = &mut best[first..first + packet_rays.len()];
-            self.top_level_packet(packet_rays, best, |p, lanes, index, inst, _, _| {
+            self.top_level_packet::<AVX>(packet_rays, best, |p, lanes, index, inst, _, _| {
                 for_each_lane(lanes, |l| {
                     let d = inst
                         .transform
@@ -269,7 +333,7 @@ impl RenderScene {
                 let t_max = best[i].as_ref().map_or(f32::INFINITY, |b| b.0);
                 stream.push(to_object(inst, &rays[i]), 0.0, t_max);
             }
-            mesh.intersect_stream(stream, wt, mesh_hits);
+            mesh.intersect_stream_kernel::<AVX>(stream, wt, mesh_hits);
             for (&k, h) in rest[..group].iter().zip(mesh_hits.iter()) {
                 if let Some(h) = h {
                     best[(k & RAY_BITS) as usize] = Some((h.t, index, LocalHit::Mesh(*h)));
@@ -289,9 +353,8 @@ impl RenderScene {
         self.occluded_packet_with(rays, t_max, true)
     }
 
-    /// [`RenderScene::occluded_packet`], with meshes traversed as a packet
-    /// (`mesh_packets`) or one lane at a time.
-    pub fn occluded_packet_with(
+    #[inline(always)]
+    fn occluded_packet_kernel<const AVX: bool>(
         &self,
         rays: &[Ray],
         t_max: &[f32],
@@ -304,46 +367,57 @@ impl RenderScene {
                 .tlas
                 .unbounded
                 .iter()
-                .any(|&i| self.occludes_instance(i, ray, 0.0, t_max[l]))
+                .any(|&i| self.occludes_instance::<AVX>(i, ray, 0.0, t_max[l]))
             {
                 blocked |= 1 << l;
             }
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let todo = ALL_LANES & !blocked;
-        packet::traverse(&self.tlas.cw, &mut packet, todo, |p, lanes, slot| {
-            let inst = &self.instances[self.tlas.leaf_instances[slot] as usize];
-            let now = match &inst.geometry {
-                InstanceGeometry::Shape(s) => {
-                    let mut now = 0;
-                    for_each_lane(lanes, |l| {
-                        let local = to_object(inst, &p.rays[l]);
-                        if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
-                            now |= 1 << l;
-                        }
-                    });
-                    now
+        let bvh = &self.tlas.bvh;
+        packet::traverse::<AVX>(bvh, &mut packet, todo, |p, lanes, leaf| {
+            let lf = bvh.leaves[leaf as usize];
+            let mut lanes = lanes;
+            let mut found = 0;
+            for slot in lf.first..lf.first + lf.count {
+                if lanes == 0 {
+                    break;
                 }
-                InstanceGeometry::Mesh(m) if !mesh_packets => {
-                    let mut now = 0;
-                    for_each_lane(lanes, |l| {
-                        let local = to_object(inst, &p.rays[l]);
-                        if m.occluded(&local, p.t_min[l], p.t_max[l]) {
-                            now |= 1 << l;
-                        }
-                    });
-                    now
-                }
-                InstanceGeometry::Mesh(m) => {
-                    let mut local = Packet::new(&[], &[], &[]);
-                    for_each_lane(lanes, |l| {
-                        local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
-                    });
-                    m.occluded_packet(&mut local, lanes)
-                }
-            };
-            blocked |= now;
-            now
+                let inst = &self.instances[self.tlas.leaf_instances[slot as usize] as usize];
+                let now = match &inst.geometry {
+                    InstanceGeometry::Shape(s) => {
+                        let mut now = 0;
+                        for_each_lane(lanes, |l| {
+                            let local = to_object(inst, &p.rays[l]);
+                            if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                                now |= 1 << l;
+                            }
+                        });
+                        now
+                    }
+                    InstanceGeometry::Mesh(m) if !mesh_packets => {
+                        let mut now = 0;
+                        for_each_lane(lanes, |l| {
+                            let local = to_object(inst, &p.rays[l]);
+                            if m.occluded_kernel::<AVX>(&local, p.t_min[l], p.t_max[l]) {
+                                now |= 1 << l;
+                            }
+                        });
+                        now
+                    }
+                    InstanceGeometry::Mesh(m) => {
+                        let mut local = Packet::new(&[], &[], &[]);
+                        for_each_lane(lanes, |l| {
+                            local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
+                        });
+                        m.occluded_packet_kernel::<AVX>(&mut local, lanes)
+                    }
+                };
+                found |= now;
+                lanes &= !now;
+            }
+            blocked |= found;
+            found
         });
         blocked & packet.valid
     }
@@ -355,7 +429,8 @@ impl RenderScene {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
         for i in 0..self.instances.len() as u32 {
-            if let Some((t, h)) = self.intersect_instance_with(i, ray, t_min, t_max, true) {
+            if let Some((t, h)) = self.intersect_instance_with::<false>(i, ray, t_min, t_max, true)
+            {
                 t_max = t;
                 best = Some((t, i, h));
             }

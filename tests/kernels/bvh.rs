@@ -105,7 +105,7 @@ fn random_transform(rng: &mut Rng, spread: f32) -> Transform {
     )
 }
 
-fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
+pub(crate) fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
     let mut instances = Vec::new();
     let meshes = [Arc::new(soup(rng, 300)), Arc::new(uv_sphere(24, 12))];
     for k in 0..60 {

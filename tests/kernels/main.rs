@@ -8,11 +8,14 @@
 //! * `cargo test --test kernels watertight::` — no leaks at shared edges
 //!   and vertices of closed meshes;
 //! * `cargo test --test kernels properties::` — property tests of the f32
-//!   shape kernels against f64 and of `offset_origin`.
+//!   shape kernels against f64 and of `offset_origin`;
+//! * `cargo test --test kernels simd::` — the portable and the AVX2 code
+//!   paths give bit-identical hits in every traversal mode.
 
 #[path = "../common/mod.rs"]
 mod common;
 
 mod bvh;
 mod properties;
+mod simd;
 mod watertight;

@@ -48,8 +48,13 @@ use crate::stats::RayCountsJson;
         .map(|v| TransportArg::from_str(&v, false).expect("one of the values listed")),
     )),
     mut_arg("batch_paths", |a| a.help("Paths per wavefront batch")),
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true,
 )]
 pub struct BenchArgs {
+    /// `prism bench rays DIR`: traversal throughput on a ray file workload.
+    #[command(subcommand)]
+    pub command: Option<BenchCommand>,
     /// Scene files to measure.
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
@@ -71,6 +76,17 @@ pub struct BenchArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Subcommands of `prism bench`.
+#[derive(clap::Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Closest-hit throughput of every traversal mode (single rays,
+    /// packets of 8, streams) and BVH build time on a ray-tracing anchors
+    /// workload (mesh.bin, primary.rays, incoherent.rays and their .ref
+    /// files, see shared/traversal-anchors), with the fraction of hits
+    /// that agree with the reference.
+    Rays(crate::rays::RaysArgs),
 }
 
 /// One integrator on one scene.
@@ -156,6 +172,9 @@ fn median(v: &[f64]) -> f64 {
 
 /// Runs the benchmark and prints the report.
 pub fn run(args: BenchArgs) -> Result<()> {
+    if let Some(BenchCommand::Rays(rays)) = args.command {
+        return crate::rays::run(rays);
+    }
     if args.runs == 0 {
         return Err(Error::Invalid("--runs must be at least 1".into()));
     }

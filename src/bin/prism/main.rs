@@ -15,6 +15,7 @@ struct Cli {
 mod args;
 mod bench;
 mod compare;
+mod rays;
 mod render;
 mod stats;
 mod tradeoff;
