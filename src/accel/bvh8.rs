@@ -115,7 +115,9 @@ impl Bvh8 {
     /// inner child of largest surface area until it has eight. A binary
     /// subtree of at most `max_leaf` primitives becomes one leaf; binary
     /// leaves of more than `max_leaf` primitives are split into leaves of
-    /// `max_leaf` under nodes of their own.
+    /// `max_leaf` under nodes of their own (boxed by `boxes`, the boxes
+    /// the tree was built over, or by the binary leaf's box when `boxes`
+    /// is empty).
     pub fn from_bvh2(bvh2: &Bvh2, boxes: &[Aabb], max_leaf: u32) -> Self {
         let max_leaf = max_leaf.max(1);
         let mut out = Self::default();
@@ -221,9 +223,13 @@ impl Bvh8 {
         let per_child = count.div_ceil(WIDTH as u32).max(max_leaf);
         let per_child = (per_child.div_ceil(max_leaf) * max_leaf) as usize;
         for (k, chunk) in prims.chunks(per_child).enumerate() {
-            let mut bb = Aabb::empty();
+            // Without the primitives' boxes, the whole leaf's box (larger,
+            // still conservative).
+            let mut bb = if boxes.is_empty() { *b } else { Aabb::empty() };
             for &p in chunk {
-                bb = bb.union(&boxes[p as usize]);
+                if let Some(pb) = boxes.get(p as usize) {
+                    bb = bb.union(pb);
+                }
             }
             self.place_leaf(index, k, &bb, chunk, boxes, max_leaf, level + 1);
         }
@@ -251,18 +257,16 @@ fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
     counts
 }
 
-/// Appends the primitives below binary node `i`.
+/// Appends the primitives below binary node `i`, left to right.
 fn gather(bvh2: &Bvh2, i: u32, out: &mut Vec<u32>) {
-    let mut stack = vec![i];
-    while let Some(i) = stack.pop() {
-        let n = &bvh2.nodes[i as usize];
-        if n.is_leaf() {
-            let f = n.first_index as usize;
-            out.extend_from_slice(&bvh2.primitive_indices[f..f + n.prim_count as usize]);
-        } else {
-            stack.push(n.first_index + 1);
-            stack.push(n.first_index);
-        }
+    let n = &bvh2.nodes[i as usize];
+    if n.is_leaf() {
+        let f = n.first_index as usize;
+        out.extend_from_slice(&bvh2.primitive_indices[f..f + n.prim_count as usize]);
+    } else {
+        // Only called on subtrees of at most a leaf's size: shallow.
+        gather(bvh2, n.first_index, out);
+        gather(bvh2, n.first_index + 1, out);
     }
 }
 

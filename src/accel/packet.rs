@@ -87,6 +87,9 @@ struct Lanes {
 /// A pending subtree: child reference, lanes, smallest entry distance.
 type Pending = (u32, LaneMask, f32);
 
+/// Pending subtrees held without allocating.
+const FIXED: usize = 48;
+
 /// Visits every leaf whose box some lane's interval reaches, calling
 /// `leaf(packet, lanes, leaf)` with the lanes that reach it (`leaf`
 /// indexes [`Bvh8::leaves`]). For closest-hit queries `leaf` shrinks
@@ -132,9 +135,22 @@ pub fn traverse<const AVX: bool>(
             lanes.inv[a][l] = node_rays[l].inv[a];
         }
     }
-    let mut stack: Vec<Pending> = Vec::with_capacity(64);
-    stack.push((0, alive, f32::NEG_INFINITY));
-    while let Some((cur, lanes_in, near)) = stack.pop() {
+    // A fixed part (nothing allocated per packet) and a spill for deeper
+    // stacks: the spill only holds entries while the fixed part is full.
+    let mut fixed = [(0u32, 0 as LaneMask, 0.0f32); FIXED];
+    let mut top = 0;
+    let mut spill: Vec<Pending> = Vec::new();
+    fixed[0] = (0, alive, f32::NEG_INFINITY);
+    top += 1;
+    loop {
+        let (cur, lanes_in, near) = if let Some(e) = spill.pop() {
+            e
+        } else if top > 0 {
+            top -= 1;
+            fixed[top]
+        } else {
+            break;
+        };
         // Lanes still alive whose closest hit is not nearer than the node.
         let mut go = 0;
         for l in 0..LANES {
@@ -183,7 +199,14 @@ pub fn traverse<const AVX: bool>(
             found[j] = (child, hit, t);
             n += 1;
         }
-        stack.extend_from_slice(&found[..n]);
+        for &e in &found[..n] {
+            if top < FIXED {
+                fixed[top] = e;
+                top += 1;
+            } else {
+                spill.push(e);
+            }
+        }
     }
 }
 

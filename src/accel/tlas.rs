@@ -245,9 +245,10 @@ impl Tlas {
     }
 
     fn convert(&mut self) {
-        // Every Bvh2 leaf holds one instance (PLOC leaves, insertions), so
-        // no leaf is split and no boxes are needed.
-        self.bvh = Bvh8::from_bvh2(&self.bvh2, &[], u32::MAX);
+        // Every Bvh2 leaf holds one instance (PLOC leaves, insertions), and
+        // so does every traversal leaf: each instance's box is tested in
+        // the node that holds it.
+        self.bvh = Bvh8::from_bvh2(&self.bvh2, &[], 1);
         self.leaf_instances = self
             .bvh
             .prims

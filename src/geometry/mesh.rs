@@ -186,7 +186,7 @@ impl Mesh {
         let blocks = bvh
             .leaves
             .iter()
-            .map(|l| Tri4::new(&corners[l.first as usize..(l.first + l.count) as usize]))
+            .map(|l| Tri4::new(&corners[l.first as usize..(l.first + l.count) as usize], l.first))
             .collect();
         let build_seconds = start.elapsed().as_secs_f64();
         let mut lo = Vec3A::splat(f32::INFINITY);
@@ -229,12 +229,11 @@ impl Mesh {
     /// The nearest hit in leaf `leaf` inside `(t_min, t_max)`.
     #[inline(always)]
     fn leaf_hit(&self, wt: &WatertightRay, leaf: u32, t_min: f32, t_max: f32) -> Option<MeshHit> {
-        let l = self.bvh.leaves[leaf as usize];
-        let (lane, t, b1, b2) =
-            wt.intersect4(&self.blocks[leaf as usize], l.count, t_min, t_max)?;
+        let block = &self.blocks[leaf as usize];
+        let (lane, t, b1, b2) = wt.intersect4(block, block.count, t_min, t_max)?;
         Some(MeshHit {
             t,
-            triangle: l.first + lane,
+            triangle: block.first + lane,
             b1,
             b2,
         })

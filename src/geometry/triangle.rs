@@ -203,17 +203,23 @@ impl WatertightRay {
 
 /// Up to four triangles side by side, for one SIMD test
 /// ([`WatertightRay::intersect4`]): `v[vertex][axis][lane]`. Unused lanes
-/// repeat lane 0 and are masked by the caller's count.
+/// repeat lane 0 and are masked by [`Tri4::count`]. The block also
+/// names its triangles, so a leaf test reads nothing else.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 pub struct Tri4 {
     /// Vertex coordinates.
     pub v: [[[f32; 4]; 3]; 3],
+    /// Index of lane 0's triangle; lane `l` holds triangle `first + l`.
+    pub first: u32,
+    /// Triangles in the block (1 to 4).
+    pub count: u32,
 }
 
 impl Tri4 {
-    /// Packs one to four triangles.
-    pub fn new(tris: &[[Vec3A; 3]]) -> Self {
+    /// Packs one to four triangles, the first of which is triangle
+    /// `first`.
+    pub fn new(tris: &[[Vec3A; 3]], first: u32) -> Self {
         debug_assert!(!tris.is_empty() && tris.len() <= 4);
         let mut v = [[[0.0; 4]; 3]; 3];
         for l in 0..4 {
@@ -224,7 +230,11 @@ impl Tri4 {
                 }
             }
         }
-        Self { v }
+        Self {
+            v,
+            first,
+            count: tris.len() as u32,
+        }
     }
 
     /// The corners of lane `l`.
@@ -374,7 +384,7 @@ mod tests {
                 tris.push([p0, p1, p2]);
             }
             let count = 1 + k % 4;
-            let block = Tri4::new(&tris[..count]);
+            let block = Tri4::new(&tris[..count], 0);
             let target = match k % 3 {
                 0 => tris[0][1],
                 1 => (tris[0][0] + tris[0][1]) * 0.5,

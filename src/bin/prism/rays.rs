@@ -41,6 +41,9 @@ pub struct RaysArgs {
     /// Traversal modes to measure (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Mode::Single, Mode::Packet8, Mode::Stream])]
     pub modes: Vec<Mode>,
+    /// Ray sets to measure (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [String::from("primary"), String::from("incoherent")], value_parser = ["primary", "incoherent"])]
+    pub sets: Vec<String>,
     /// Use only the first N rays of each set (quick runs, profiling).
     #[arg(long)]
     pub limit: Option<usize>,
@@ -309,10 +312,12 @@ pub fn run(args: RaysArgs) -> Result<()> {
         return Err(Error::Invalid("--threads must be at least 1".into()));
     }
     let data = load_mesh(&args.dir)?;
-    let mut sets = [
-        ("primary", load_rays(&args.dir, "primary")?),
-        ("incoherent", load_rays(&args.dir, "incoherent")?),
-    ];
+    let mut sets = Vec::new();
+    for name in ["primary", "incoherent"] {
+        if args.sets.iter().any(|s| s == name) {
+            sets.push((name, load_rays(&args.dir, name)?));
+        }
+    }
     if let Some(n) = args.limit {
         for (_, s) in &mut sets {
             let n = n.min(s.rays.len());

@@ -22,7 +22,7 @@ use crate::integrators::wavefront::routing::{
 use crate::integrators::{accumulate, film_sample};
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
-use crate::scene::{Hit, InstanceGeometry, RenderScene, StreamScratch};
+use crate::scene::RenderScene;
 use crate::transport::interaction::Interaction;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
@@ -59,35 +59,16 @@ pub fn generate_camera_rays(
     rays.camera += count as u64;
 }
 
-/// One chunk's buffers for tracing its rays as streams.
-#[derive(Debug, Default)]
-pub struct StreamBuffers {
-    rays: Vec<Ray>,
-    hits: Vec<Option<Hit>>,
-    scratch: StreamScratch,
-}
-
-impl StreamBuffers {
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.rays.capacity() * std::mem::size_of::<Ray>()
-            + self.hits.capacity() * std::mem::size_of::<Option<Hit>>()
-            + self.scratch.bytes()
-    }
-}
-
-/// One chunk's buffers of [`intersect_closest`]: its routed rays and its
-/// stream buffers.
+/// One chunk's buffers of [`intersect_closest`]: its routed rays.
 #[derive(Debug, Default)]
 pub struct IntersectChunk {
     routed: RoutedChunk,
-    streams: StreamBuffers,
 }
 
 impl IntersectChunk {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.routed.bytes() + self.streams.bytes()
+        self.routed.bytes()
     }
 }
 
@@ -105,50 +86,47 @@ pub fn intersect_closest(
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
 ) {
-    // Streams pay only where there is a mesh to traverse.
-    let use_streams = scene
-        .instances()
-        .iter()
-        .any(|i| matches!(i.geometry, InstanceGeometry::Mesh(_)));
+    // Eight neighbouring rays pointing into one octant go through the top
+    // level and the meshes as one packet: coherent rays (camera rays,
+    // mirror bounces) share the nodes, and a packet whose lanes diverge is
+    // finished ray by ray (`crate::accel::packet`); rays pointing apart
+    // are traced one at a time. Measured faster than mesh streams for
+    // camera and for secondary rays since meshes have their own 8-wide
+    // layout (README, "Measurement notes").
     let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
-        let IntersectChunk { routed, streams } = chunk;
+        let IntersectChunk { routed } = chunk;
         routed.clear();
-        if use_streams {
-            // The top level in packets of eight, then every mesh with
-            // one stream per direction octant for the whole chunk
-            // (see `crate::accel::stream`): measured faster than packets of
-            // eight for camera rays as well as for secondary rays,
-            // which share a mesh's upper nodes even where packets of
-            // eight share nothing.
-            let StreamBuffers {
-                rays: r,
-                hits,
-                scratch,
-            } = streams;
-            r.clear();
-            r.extend(range.clone().map(|i| rays.ray(i)));
-            hits.clear();
-            hits.resize(r.len(), None);
-            scene.intersect_stream(r, hits, scratch);
-            for (k, h) in hits.iter().enumerate() {
-                routed.route(classes, rays, range.start + k, *h);
-            }
-            return;
-        }
         let mut found = [None; LANES];
         for i in range.clone() {
             let lane = (i - range.start) % LANES;
             if lane == 0 {
-                // No mesh: eight neighbouring rays go through the top
-                // level as one packet.
                 let n = (range.end - i).min(LANES);
                 let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                scene.intersect_packet_with(&packet[..n], &mut found, true);
+                if one_octant(&packet[..n]) {
+                    scene.intersect_packet_with(&packet[..n], &mut found, true);
+                } else {
+                    for (f, r) in found.iter_mut().zip(&packet[..n]) {
+                        *f = scene.intersect(r, 0.0, f32::INFINITY);
+                    }
+                }
             }
             routed.route(classes, rays, i, found[lane]);
         }
     });
     join_routed(chunks.iter().map(|c| &c.routed), escaped, hits);
+}
+
+/// Whether all `rays` point into one octant: the packets worth tracing
+/// together (others are traced one at a time, which costs them less).
+fn one_octant(rays: &[Ray]) -> bool {
+    let octant = |r: &Ray| {
+        let d = r.direction;
+        (d.x.is_sign_negative() as u8)
+            | (d.y.is_sign_negative() as u8) << 1
+            | (d.z.is_sign_negative() as u8) << 2
+    };
+    let first = octant(&rays[0]);
+    rays.iter().all(|r| octant(r) == first)
 }
 
 /// Stage: escaped rays bring back the background.
