@@ -106,6 +106,9 @@ impl Bvh8 {
         params.pre_split = false;
         // Leaves of one primitive: the collapse gathers small subtrees.
         params.max_prims_per_leaf = 1;
+        // With leaves of one primitive obvhs's leaf collapse does nothing,
+        // so its second reinsertion pass would only repeat the first.
+        params.post_collapse_reinsertion_batch_ratio_multiplier = 0.0;
         let bvh2 = obvhs::bvh2::builder::build_bvh2(boxes, params, &mut Default::default());
         Self::from_bvh2(&bvh2, boxes, max_leaf)
     }
@@ -124,9 +127,8 @@ impl Bvh8 {
         if bvh2.nodes.is_empty() {
             return out;
         }
-        let counts = subtree_counts(bvh2);
         // A child that becomes a leaf: a binary leaf, or a small subtree.
-        let leafish = |i: u32| bvh2.nodes[i as usize].is_leaf() || counts[i as usize] <= max_leaf;
+        let leafish = |i: u32| count_upto(bvh2, i, max_leaf) <= max_leaf;
         let mut prims = Vec::new();
         out.nodes.push(Node8::BLANK);
         // (binary node, node slot, level)
@@ -140,29 +142,38 @@ impl Bvh8 {
         while let Some((b, slot, level)) = work.pop() {
             out.depth = out.depth.max(level);
             let node = &bvh2.nodes[b as usize];
-            let mut kids = [0u32; WIDTH];
-            kids[0] = node.first_index;
-            kids[1] = node.first_index + 1;
+            // (binary node, becomes a leaf, half area)
+            let kid = |i: u32| {
+                let leaf = leafish(i);
+                let area = if leaf {
+                    f32::NEG_INFINITY
+                } else {
+                    bvh2.nodes[i as usize].aabb.half_area()
+                };
+                (i, leaf, area)
+            };
+            let mut kids = [(0u32, false, 0.0f32); WIDTH];
+            kids[0] = kid(node.first_index);
+            kids[1] = kid(node.first_index + 1);
             let mut n = 2;
             while n < WIDTH {
                 let mut best = None;
                 let mut best_area = f32::NEG_INFINITY;
-                for (k, &kid) in kids[..n].iter().enumerate() {
-                    let area = bvh2.nodes[kid as usize].aabb.half_area();
-                    if !leafish(kid) && area > best_area {
+                for (k, &(_, leaf, area)) in kids[..n].iter().enumerate() {
+                    if !leaf && area > best_area {
                         best_area = area;
                         best = Some(k);
                     }
                 }
                 let Some(k) = best else { break };
-                let first = bvh2.nodes[kids[k] as usize].first_index;
-                kids[k] = first;
-                kids[n] = first + 1;
+                let first = bvh2.nodes[kids[k].0 as usize].first_index;
+                kids[k] = kid(first);
+                kids[n] = kid(first + 1);
                 n += 1;
             }
-            for (c, &kid) in kids[..n].iter().enumerate() {
+            for (c, &(kid, leaf, _)) in kids[..n].iter().enumerate() {
                 let kn = &bvh2.nodes[kid as usize];
-                if leafish(kid) {
+                if leaf {
                     prims.clear();
                     gather(bvh2, kid, &mut prims);
                     out.place_leaf(slot, c, &kn.aabb, &prims, boxes, max_leaf, level + 1);
@@ -236,25 +247,29 @@ impl Bvh8 {
     }
 }
 
-/// Primitives below each binary node.
-fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
-    let mut counts = vec![0u32; bvh2.nodes.len()];
-    // Post-order with an explicit stack: (node, children done).
-    let mut stack = vec![(0u32, false)];
-    while let Some((i, done)) = stack.pop() {
+/// Primitives below binary node `i`, counted up to just past `limit`
+/// (a small subtree is read whole, a large one only until it is known to
+/// be large).
+fn count_upto(bvh2: &Bvh2, i: u32, limit: u32) -> u32 {
+    // A subtree of at most `limit` primitives is at most `limit` levels
+    // deep (every inner node splits its primitives), so the descent is
+    // cut there.
+    fn count(bvh2: &Bvh2, i: u32, limit: u32, depth_left: u32) -> u32 {
         let n = &bvh2.nodes[i as usize];
         if n.is_leaf() {
-            counts[i as usize] = n.prim_count;
-        } else if done {
-            counts[i as usize] =
-                counts[n.first_index as usize].saturating_add(counts[n.first_index as usize + 1]);
-        } else {
-            stack.push((i, true));
-            stack.push((n.first_index, false));
-            stack.push((n.first_index + 1, false));
+            return n.prim_count;
         }
+        if depth_left == 0 {
+            return limit + 1;
+        }
+        let left = count(bvh2, n.first_index, limit, depth_left - 1);
+        if left >= limit {
+            return limit + 1;
+        }
+        left + count(bvh2, n.first_index + 1, limit - left, depth_left - 1)
     }
-    counts
+    let limit = limit.min(64);
+    count(bvh2, i, limit, limit)
 }
 
 /// Appends the primitives below binary node `i`, left to right.

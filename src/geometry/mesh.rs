@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use glam::{Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
+use rayon::prelude::*;
 
 use crate::accel::build::padded_aabb;
 /// Re-exported: a mesh is built with one of these presets.
@@ -164,9 +165,10 @@ impl Mesh {
         };
 
         let start = Instant::now();
+        // The per-triangle passes run on the worker threads, like the build.
         let boxes: Vec<Aabb> = data
             .indices
-            .iter()
+            .par_iter()
             .map(|t| {
                 let [a, b, c] = t.map(|i| positions[i as usize]);
                 padded_aabb(a.min(b).min(c), a.max(b).max(c))
@@ -176,17 +178,22 @@ impl Mesh {
         MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let triangles: Vec<[u32; 3]> = bvh
             .prims
-            .iter()
+            .par_iter()
             .map(|&i| data.indices[i as usize])
             .collect();
         let corners: Vec<[Vec3A; 3]> = triangles
-            .iter()
+            .par_iter()
             .map(|t| t.map(|i| positions[i as usize]))
             .collect();
         let blocks = bvh
             .leaves
-            .iter()
-            .map(|l| Tri4::new(&corners[l.first as usize..(l.first + l.count) as usize], l.first))
+            .par_iter()
+            .map(|l| {
+                Tri4::new(
+                    &corners[l.first as usize..(l.first + l.count) as usize],
+                    l.first,
+                )
+            })
             .collect();
         let build_seconds = start.elapsed().as_secs_f64();
         let mut lo = Vec3A::splat(f32::INFINITY);

@@ -35,6 +35,9 @@ pub struct RaysArgs {
     /// BVH builds timed; the best is reported.
     #[arg(long, default_value_t = 3)]
     pub build_reps: usize,
+    /// BVH build preset.
+    #[arg(long, value_enum, default_value_t = crate::args::QualityArg::Medium)]
+    pub bvh_quality: crate::args::QualityArg,
     /// SIMD code path [default: the fastest this CPU has].
     #[arg(long, value_enum)]
     pub isa: Option<IsaArg>,
@@ -345,7 +348,14 @@ pub fn run(args: RaysArgs) -> Result<()> {
             let d = data.clone();
             let start = Instant::now();
             let m = pool
-                .install(|| Mesh::new("anchors", d, NormalMode::Flat, BuildQuality::Medium))
+                .install(|| {
+                    Mesh::new(
+                        "anchors",
+                        d,
+                        NormalMode::Flat,
+                        BuildQuality::from(args.bvh_quality),
+                    )
+                })
                 .map_err(|e| Error::Invalid(format!("{}: {e}", args.dir.display())))?;
             best = best.min(start.elapsed().as_secs_f64());
             mesh = Some(m);
@@ -393,7 +403,10 @@ pub fn run(args: RaysArgs) -> Result<()> {
             result.dir, result.triangles, result.isa
         );
         for (t, ms) in &result.build_ms {
-            println!("  build (medium, leaves of 4), {t} threads: {ms:.1} ms");
+            println!(
+                "  build ({:?}, leaves of up to 4), {t} threads: {ms:.1} ms",
+                args.bvh_quality
+            );
         }
         println!(
             "  {:<11} {:<8} {:>7} {:>10} {:>12} {:>9} {:>9}",

@@ -20,9 +20,9 @@ use crate::integrators::wavefront::routing::{
     ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
 };
 use crate::integrators::{accumulate, film_sample};
+use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
-use crate::scene::RenderScene;
 use crate::transport::interaction::Interaction;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
