@@ -6,7 +6,8 @@
 //!   bad input gives a clear message and a non-zero exit, never a panic
 //!   or an output file; help, statistics and the benchmark's JSON;
 //! * `cargo test --test cli tools::` — the measuring tools: the error
-//!   trend against samples per pixel, `prism compare` and `prism tradeoff`.
+//!   trend against samples per pixel, `prism compare`, `prism tradeoff`
+//!   and `prism bench rays` on a small synthetic workload.
 
 #[path = "../common/mod.rs"]
 mod common;

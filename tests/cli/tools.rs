@@ -333,3 +333,132 @@ fn tradeoff_rejects_bad_input_before_writing() {
     let out = tradeoff(&file, &[]);
     assert_clean_failure(&out, &["file", "not a folder"]);
 }
+
+/// Writes an anchors-format workload: two triangles forming the square
+/// [-1, 1]^2 at z = 0, rays down the z axis through a grid (inside and
+/// outside the square), and reference hits computed here.
+fn anchors_workload(dir: &Path, corrupt_refs: bool) {
+    let header = |magic: &[u8; 8], a: u32, b: u32, c: u32| {
+        let mut h = magic.to_vec();
+        for v in [a, b, c, 0, 1, 0] {
+            h.extend_from_slice(&v.to_le_bytes());
+        }
+        h
+    };
+    let mut mesh = header(b"ANCMESH1", 4, 2, 0);
+    for p in [
+        [-1.0f32, -1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ] {
+        for c in p {
+            mesh.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for t in [[0u32, 1, 2], [0, 2, 3]] {
+        for i in t {
+            mesh.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    std::fs::write(dir.join("mesh.bin"), mesh).unwrap();
+    for name in ["primary", "incoherent"] {
+        let n = 64u32;
+        let mut rays = header(b"ANCRAYS1", n, 8, 8);
+        let mut refs = header(b"ANCREFS1", n - corrupt_refs as u32, 0, 0);
+        for k in 0..n {
+            // x, y in [-1.6, 1.6): points beyond |1| miss.
+            let (x, y) = ((k % 8) as f32 * 0.4 - 1.5, (k / 8) as f32 * 0.4 - 1.5);
+            for v in [x, y, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY] {
+                rays.extend_from_slice(&v.to_le_bytes());
+            }
+            let inside = x.abs() < 1.0 && y.abs() < 1.0;
+            // Triangle 0 holds the points below the diagonal y = x.
+            let prim = if !inside {
+                u32::MAX
+            } else if y < x {
+                0
+            } else {
+                1
+            };
+            if !(corrupt_refs && k == n - 1) {
+                refs.extend_from_slice(&prim.to_le_bytes());
+                refs.extend_from_slice(
+                    &(if inside { 5.0f32 } else { f32::INFINITY }).to_le_bytes(),
+                );
+            }
+        }
+        std::fs::write(dir.join(format!("{name}.rays")), rays).unwrap();
+        std::fs::write(dir.join(format!("{name}.ref")), refs).unwrap();
+    }
+}
+
+#[test]
+fn bench_rays_measures_every_mode_and_agrees_with_the_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    anchors_workload(dir.path(), false);
+    let out = prism()
+        .args(["bench", "rays"])
+        .arg(dir.path())
+        .args([
+            "--threads",
+            "1,2",
+            "--reps",
+            "1",
+            "--build-reps",
+            "1",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["triangles"], 2);
+    let modes = v["modes"].as_array().unwrap();
+    // Two ray sets, three modes, two thread counts.
+    assert_eq!(modes.len(), 12);
+    for m in modes {
+        // 5 x 5 grid points inside the square; the 5 on the shared
+        // diagonal go to exactly one of the two triangles, which the
+        // reference may name differently.
+        assert_eq!(m["hits"], 25, "{m}");
+        let agree = m["ref_agree"].as_f64().unwrap();
+        assert!(agree >= 1.0 - 5.0 / 64.0, "{m}");
+        assert!(m["best_mrays"].as_f64().unwrap() > 0.0);
+    }
+    // Both SIMD paths can be asked for; a wrong file is a clean error.
+    let out = prism()
+        .args(["bench", "rays"])
+        .arg(dir.path())
+        .args([
+            "--isa",
+            "portable",
+            "--reps",
+            "1",
+            "--build-reps",
+            "1",
+            "--modes",
+            "single",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("SIMD path portable"));
+    let bad = tempfile::tempdir().unwrap();
+    anchors_workload(bad.path(), true);
+    let out = prism()
+        .args(["bench", "rays"])
+        .arg(bad.path())
+        .output()
+        .unwrap();
+    assert_clean_failure(&out, &["primary.ref", "reference hits"]);
+    let out = prism()
+        .args(["bench", "rays", "/nonexistent/anchors"])
+        .output()
+        .unwrap();
+    assert_clean_failure(&out, &["cannot read", "mesh.bin"]);
+}
