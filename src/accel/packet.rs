@@ -340,6 +340,17 @@ mod tests {
             Aabb::new(Vec3A::new(9.5, -0.5, -0.5), Vec3A::new(10.5, 0.5, 0.5)),
         ];
         let bvh = Bvh8::build(&boxes, obvhs::BvhBuildParams::medium_build(), 1);
+        // The lanes that reach each box's leaf.
+        let reached = |rays: &[Ray]| {
+            let mut p = Packet::new(rays, &[0.0; 4], &[f32::INFINITY; 4]);
+            let mut reached = [0 as LaneMask; 2];
+            traverse::<false>(&bvh, &mut p, ALL_LANES, |_, lanes, leaf| {
+                let l = bvh.leaves[leaf as usize];
+                reached[bvh.prims[l.first as usize] as usize] |= lanes;
+                0
+            });
+            reached
+        };
         // All in one octant: the packet path. Lane 3 runs parallel to x.
         let rays = [
             Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
@@ -347,24 +358,10 @@ mod tests {
             Ray::new(Vec3A::new(10.0, 0.2, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
             Ray::new(Vec3A::new(0.0, 0.0, -5.0), Vec3A::new(0.0, 0.0, 1.0)),
         ];
-        let mut p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
-        let mut reached = [0 as LaneMask; 2];
-        traverse::<false>(&bvh, &mut p, ALL_LANES, |_, lanes, leaf| {
-            let l = bvh.leaves[leaf as usize];
-            reached[bvh.prims[l.first as usize] as usize] |= lanes;
-            0
-        });
-        assert_eq!(reached, [0b1001, 0b0100]);
+        assert_eq!(reached(&rays), [0b1001, 0b0100]);
         // Mixed octants: ray by ray, same answer.
         let mut rays = rays;
         rays[2] = Ray::new(Vec3A::new(10.0, 0.2, 5.0), -Vec3A::Z);
-        let mut p = Packet::new(&rays, &[0.0; 4], &[f32::INFINITY; 4]);
-        let mut reached = [0 as LaneMask; 2];
-        traverse::<false>(&bvh, &mut p, ALL_LANES, |_, lanes, leaf| {
-            let l = bvh.leaves[leaf as usize];
-            reached[bvh.prims[l.first as usize] as usize] |= lanes;
-            0
-        });
-        assert_eq!(reached, [0b1001, 0b0100]);
+        assert_eq!(reached(&rays), [0b1001, 0b0100]);
     }
 }
