@@ -96,6 +96,7 @@ impl SettingsDesc {
                 .rr_start_depth
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
+            window: None,
         }
     }
 }
