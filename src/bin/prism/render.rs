@@ -1,5 +1,6 @@
 //! `prism render`: one scene file to one image, with optional statistics.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -7,6 +8,9 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use prism::core::error::{Error, Result};
+use prism::core::settings::RenderSettings;
+use prism::core::window::RenderWindow;
+use prism::image::shard::Manifest;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::OutputFormat;
 use prism::io::desc::{Geometry, SettingsDesc};
@@ -17,6 +21,7 @@ use crate::args::{
     BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
     SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
+use crate::shard::{self, PixelBounds, ShardSpec};
 use crate::stats::{RenderStats, WavefrontStatsJson};
 
 /// Options of `prism render`.
@@ -70,6 +75,23 @@ pub struct RenderArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
+    /// Render only shard I of N and write it as a shard (an .exr file for
+    /// `prism merge`). The image is cut into 4N bands of whole rows (fewer
+    /// when it has fewer rows); shard I renders bands I, I+N, I+2N, ... so
+    /// that slow and fast parts of the image spread over all shards.
+    /// `auto/N` takes I from PRISM_SHARD_INDEX, SLURM_ARRAY_TASK_ID or
+    /// JOB_COMPLETION_INDEX (the first set), counting from 0.
+    #[arg(long, value_name = "I/N", value_parser = shard::parse_shard, conflicts_with = "pixel_bounds")]
+    shard: Option<ShardSpec>,
+    /// Render only columns X0..X1 of rows Y0..Y1 (integers, half-open) and
+    /// write them as a shard (.exr) for `prism merge`.
+    #[arg(long, value_name = "X0,X1,Y0,Y1", value_parser = shard::parse_pixel_bounds)]
+    pixel_bounds: Option<PixelBounds>,
+    /// Render only samples A..B (half-open, from 0) of each pixel's --spp
+    /// and write a sample shard (.exr with exact sums and counts) for
+    /// `prism merge`; combines with --shard or --pixel-bounds.
+    #[arg(long, value_name = "A..B", value_parser = shard::parse_samples)]
+    samples: Option<Range<u32>>,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -78,11 +100,67 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+impl RenderArgs {
+    /// True when rendering part of the image or of its samples.
+    fn is_shard(&self) -> bool {
+        self.shard.is_some() || self.pixel_bounds.is_some() || self.samples.is_some()
+    }
+
+    /// The window of a shard and how it was asked for, checked against
+    /// the image size and spp; `None` for a whole render.
+    fn window(&self, settings: &RenderSettings) -> Result<Option<(RenderWindow, String)>> {
+        if !self.is_shard() {
+            return Ok(None);
+        }
+        let (w, h) = (settings.width, settings.height);
+        let mut window = RenderWindow::full(w, h, settings.spp);
+        let mut spec = "whole image".to_string();
+        if let Some(s) = self.shard {
+            let index = match s.index {
+                Some(i) => i,
+                None => shard::auto_index(s.count)?,
+            };
+            window.rows = shard::shard_rows(index, s.count, h)?;
+            spec = format!("--shard {index}/{}", s.count);
+        }
+        if let Some(b) = &self.pixel_bounds {
+            if b.columns.end > w || b.rows.end > h {
+                return Err(Error::Invalid(format!(
+                    "--pixel-bounds {},{},{},{}: outside the {w}x{h} image",
+                    b.columns.start, b.columns.end, b.rows.start, b.rows.end
+                )));
+            }
+            window.columns = b.columns.clone();
+            window.rows = vec![b.rows.clone()];
+            spec = format!(
+                "--pixel-bounds {},{},{},{}",
+                b.columns.start, b.columns.end, b.rows.start, b.rows.end
+            );
+        }
+        if let Some(r) = &self.samples {
+            if r.end > settings.spp {
+                return Err(Error::Invalid(format!(
+                    "--samples {}..{}: beyond the {} samples per pixel (--spp)",
+                    r.start, r.end, settings.spp
+                )));
+            }
+            window.samples = r.clone();
+        }
+        Ok(Some((window, spec)))
+    }
+}
+
 /// Renders the scene and writes the image (and the statistics).
 pub fn run(args: RenderArgs) -> Result<()> {
     let wall = Instant::now();
     // Fail on a bad output name before spending time on the render.
-    OutputFormat::from_path(&args.output)?;
+    let format = OutputFormat::from_path(&args.output)?;
+    if args.is_shard() && format != OutputFormat::Exr {
+        return Err(Error::Invalid(format!(
+            "{}: a shard (--shard, --pixel-bounds, --samples) is written as an .exr file; `prism merge` makes the PNG from all shards",
+            args.output.display()
+        )));
+    }
     if let Some(s) = &args.stats
         && s.extension().and_then(|e| e.to_str()) != Some("json")
     {
@@ -98,7 +176,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
 fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
     let quality: BuildQuality = args.bvh_quality.into();
     let load_start = Instant::now();
-    let desc = prism::io::load(&args.scene, quality)?;
+    let (desc, scene_hash) = if args.is_shard() {
+        let (desc, hash) = prism::io::load_with_digest(&args.scene, quality)?;
+        (desc, Some(hash))
+    } else {
+        (prism::io::load(&args.scene, quality)?, None)
+    };
     let load_seconds = load_start.elapsed().as_secs_f64();
     let mut mesh_build_seconds = 0.0;
     let mut seen = std::collections::HashSet::new();
@@ -124,6 +207,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         ..args.frame.desc()
     }
     .resolve(s);
+    let mut settings = settings;
+    // The image size and spp are checked before the window is made from them.
+    settings.validate().map_err(|e| {
+        Error::Invalid(format!(
+            "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
+            args.scene.display()
+        ))
+    })?;
+    let window = args.window(&settings)?;
+    settings.window = window.as_ref().map(|(w, _)| w.clone());
     settings.validate().map_err(|e| {
         Error::Invalid(format!(
             "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
@@ -149,7 +242,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let light_count = desc.lights.len();
 
     let bar = progress_bar(
-        settings.height as u64,
+        settings.window().row_count() as u64,
         args.quiet,
         "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
     );
@@ -193,7 +286,27 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let Some(film) = &frame.film else {
         return Err(Error::Invalid("the renderer produced no image".into()));
     };
-    prism::image::output::write_image(&args.output, film, &png)?;
+    match (&window, scene_hash) {
+        (Some((w, spec)), Some(scene_hash)) => {
+            let manifest = Manifest {
+                version: env!("CARGO_PKG_VERSION").to_string(),
+                scene_hash,
+                settings: shard::settings_text(
+                    &settings,
+                    args.integrator.kind().name(),
+                    args.camera,
+                    &format!("{:?}", args.bvh_quality).to_lowercase(),
+                ),
+                seed: settings.seed,
+                spp: settings.spp,
+                shard: spec.clone(),
+                samples: w.samples.clone(),
+            };
+            let shard = shard::build_shard(manifest, &settings, w, film, frame.sums.as_ref());
+            prism::image::shard::write_shard(&args.output, &shard)?;
+        }
+        _ => prism::image::output::write_image(&args.output, film, &png)?,
+    }
 
     let rays = frame.counters.rays;
     let render_seconds = frame.render_seconds;
