@@ -69,8 +69,9 @@ pub fn render_recursive(world: &mut World) {
         .is_some_and(|p| p.enabled);
     if progressive {
         if config.settings.window.is_some() {
-            world.resource_mut::<Frame>().error =
-                Some("progressive rendering covers the whole image: it takes no render window".into());
+            world.resource_mut::<Frame>().error = Some(
+                "progressive rendering covers the whole image: it takes no render window".into(),
+            );
             return;
         }
         render_progressive(world, &scene, camera, &config);

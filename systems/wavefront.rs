@@ -536,13 +536,7 @@ pub fn update_film(
 ) {
     let (first, _) = frame.batches[frame.batch];
     stats.0.run_stage(Stage::UpdateFilm, |counters| {
-        kernels::update_film(
-            &radiance.0,
-            &frame.paths,
-            first,
-            &mut pixels.0,
-            counters,
-        )
+        kernels::update_film(&radiance.0, &frame.paths, first, &mut pixels.0, counters)
     });
 }
 
@@ -575,7 +569,8 @@ pub fn render_wavefront(world: &mut World) {
     world.insert_resource(WavefrontStats::default());
 
     let start = Instant::now();
-    let rows_per_path = 1.0 / (window_width as f64 * (world.resource::<WavefrontFrame>().paths.samples()) as f64);
+    let rows_per_path =
+        1.0 / (window_width as f64 * (world.resource::<WavefrontFrame>().paths.samples()) as f64);
     let mut rows_reported = 0u64;
     for (b, &(first, count)) in batches.iter().enumerate() {
         world.resource_mut::<WavefrontFrame>().batch = b;

@@ -185,9 +185,64 @@ impl PathMap {
     }
 }
 
+/// Bands of rows per shard: `--shard I/N` cuts the image into `4 N` bands
+/// (fewer for short images) and gives shard `I` bands `I, I + N, ...`, so
+/// that every shard gets rows from all over the image.
+pub const BANDS_PER_SHARD: u32 = 4;
+
+/// The rows of shard `index` of `count` in an image `height` rows tall:
+/// the image is cut into `min(height, 4 count)` bands, band `b` covering
+/// rows `b h / B .. (b + 1) h / B` (integer division: no band is lost or
+/// shared whatever the sizes), and the shard takes every `count`-th band
+/// from band `index`, adjacent bands joined.
+pub fn shard_rows(index: u32, count: u32, height: u32) -> Result<Vec<Range<u32>>, String> {
+    if count == 0 || index >= count || count > height {
+        return Err(format!(
+            "--shard {index}/{count}: the image has only {height} rows, so at most {height} shards"
+        ));
+    }
+    let bands = (count * BANDS_PER_SHARD).min(height) as u64;
+    let h = height as u64;
+    let mut rows: Vec<Range<u32>> = Vec::new();
+    for b in (index as u64..bands).step_by(count as usize) {
+        let r = (b * h / bands) as u32..((b + 1) * h / bands) as u32;
+        match rows.last_mut() {
+            Some(last) if last.end == r.start => last.end = r.end,
+            _ => rows.push(r),
+        }
+    }
+    Ok(rows)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shard_rows_partition_the_image_and_interleave() {
+        for height in [1u32, 2, 7, 12, 100, 1081] {
+            for count in 1..=height.min(9) {
+                let mut seen = vec![0u32; height as usize];
+                for i in 0..count {
+                    let rows = shard_rows(i, count, height).unwrap();
+                    assert!(!rows.is_empty(), "{i}/{count} of {height}");
+                    for r in rows {
+                        for y in r {
+                            seen[y as usize] += 1;
+                        }
+                    }
+                }
+                assert!(seen.iter().all(|&c| c == 1), "{count} of {height}");
+            }
+        }
+        // Interleaved bands: shard 0 of 2 on 16 rows has 4 bands of 2.
+        assert_eq!(
+            shard_rows(0, 2, 16).unwrap(),
+            vec![0..2, 4..6, 8..10, 12..14]
+        );
+        assert_eq!(shard_rows(0, 1, 16).unwrap(), vec![0..16]);
+        assert!(shard_rows(0, 9, 8).is_err());
+    }
 
     #[test]
     fn full_window_paths_are_pixel_major_like_the_whole_image() {

@@ -70,7 +70,11 @@ pub fn to_fixed(v: f32) -> i128 {
     } else {
         0
     };
-    if bits >> 31 != 0 { -magnitude } else { magnitude }
+    if bits >> 31 != 0 {
+        -magnitude
+    } else {
+        magnitude
+    }
 }
 
 /// One pixel's sum over its finite samples, exact: each sample channel is
@@ -224,7 +228,15 @@ mod tests {
         // Brute-force cross-check against the library conversion over
         // random bit patterns of every exponent, and the edges.
         let mut r = Sampler::new(3, 0, 0);
-        let mut values = vec![0.0, -0.0, 1.0, -1.0, f32::MIN_POSITIVE, 1e-30, 2f32.powi(-40)];
+        let mut values = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::MIN_POSITIVE,
+            1e-30,
+            2f32.powi(-40),
+        ];
         values.extend([MAX_SAMPLE_MAGNITUDE, -MAX_SAMPLE_MAGNITUDE, 1e13, -1e30]);
         for _ in 0..200_000 {
             let hi = (r.next_f32() * 65536.0) as u32;
@@ -271,7 +283,10 @@ mod tests {
         // The mean is the exact mean to within the roundings to f64 and f32.
         let exact: f64 = samples.iter().map(|c| c.y as f64).sum::<f64>() / 1000.0;
         let m = forward.mean().y as f64;
-        assert!((m - exact).abs() <= exact * 2f64.powi(-23), "{m} vs {exact}");
+        assert!(
+            (m - exact).abs() <= exact * 2f64.powi(-23),
+            "{m} vs {exact}"
+        );
     }
 
     #[test]

@@ -34,8 +34,9 @@ use exr::prelude::{
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
-use crate::core::settings::{MAX_PIXELS, MAX_SPP};
-use crate::image::film::{Film, PixelSum};
+use crate::core::settings::{MAX_PIXELS, MAX_SPP, RenderSettings};
+use crate::core::window::RenderWindow;
+use crate::image::film::{Film, PixelAccumulator, PixelSum};
 use crate::image::output::write_atomic;
 
 /// Header attribute names of the manifest.
@@ -116,6 +117,46 @@ pub struct Shard {
 }
 
 impl Shard {
+    /// The shard of a windowed render, from `film` and `sums` as the frame
+    /// gives them (the window's pixels, its rows in order): one part per
+    /// range of rows, with sums when the shard has only some of the
+    /// samples (`sums` must then be given).
+    pub fn from_window(
+        manifest: Manifest,
+        settings: &RenderSettings,
+        window: &RenderWindow,
+        film: &Film,
+        sums: Option<&PixelAccumulator>,
+    ) -> Shard {
+        let sample_shard = window.samples != (0..settings.spp);
+        let width = window.columns.end - window.columns.start;
+        let mut parts = Vec::new();
+        let mut first_row = 0usize;
+        for r in &window.rows {
+            let h = (r.end - r.start) as usize;
+            let span = first_row * width as usize..(first_row + h) * width as usize;
+            parts.push(ShardPart {
+                x0: window.columns.start,
+                y0: r.start,
+                width,
+                height: h as u32,
+                means: film.pixels[span.clone()].to_vec(),
+                sums: if sample_shard {
+                    sums.map(|s| s.pixels()[span].to_vec())
+                } else {
+                    None
+                },
+            });
+            first_row += h;
+        }
+        Shard {
+            manifest,
+            width: settings.width,
+            height: settings.height,
+            parts,
+        }
+    }
+
     /// True when the shard holds only some of each pixel's samples.
     pub fn is_sample_shard(&self) -> bool {
         self.manifest.samples != (0..self.manifest.spp)
@@ -180,8 +221,14 @@ pub fn write_shard(path: &Path, shard: &Shard) -> Result<()> {
             }
         }
         let mut attributes = LayerAttributes::named(
-            format!("rows {}-{} columns {}-{}", p.y0, p.y0 + p.height, p.x0, p.x0 + p.width)
-                .as_str(),
+            format!(
+                "rows {}-{} columns {}-{}",
+                p.y0,
+                p.y0 + p.height,
+                p.x0,
+                p.x0 + p.width
+            )
+            .as_str(),
         );
         attributes.layer_position = Vec2(p.x0 as i32, p.y0 as i32);
         attributes.other = manifest.clone();
@@ -266,7 +313,10 @@ pub fn read_shard(path: &Path) -> Result<Shard> {
             shard: get(key::SHARD)?,
             samples,
         };
-        if m.spp == 0 || m.spp > MAX_SPP || m.samples.start >= m.samples.end || m.samples.end > m.spp
+        if m.spp == 0
+            || m.spp > MAX_SPP
+            || m.samples.start >= m.samples.end
+            || m.samples.end > m.spp
         {
             return Err(bad(format!(
                 "invalid sample range {}..{} of {} spp in the manifest",

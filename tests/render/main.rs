@@ -14,7 +14,9 @@
 //! * `cargo test --test render wavefront::` — the wavefront integrator
 //!   against the recursive one, and its queues;
 //! * `cargo test --test render scene_updates::` — incremental scene updates
-//!   against scenes built from scratch, progressive accumulation.
+//!   against scenes built from scratch, progressive accumulation;
+//! * `cargo test --test render shards::` — region and sample-range shards
+//!   written, read back and merged against the single render, bit for bit.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -23,4 +25,5 @@ mod analytic;
 mod path;
 mod robustness;
 mod scene_updates;
+mod shards;
 mod wavefront;

@@ -10,9 +10,9 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use prism::core::error::{Error, Result};
 use prism::core::settings::RenderSettings;
 use prism::core::window::RenderWindow;
-use prism::image::shard::Manifest;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::OutputFormat;
+use prism::image::shard::Manifest;
 use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::wavefront::BatchSize;
 use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
@@ -120,7 +120,8 @@ impl RenderArgs {
                 Some(i) => i,
                 None => shard::auto_index(s.count)?,
             };
-            window.rows = shard::shard_rows(index, s.count, h)?;
+            window.rows =
+                prism::core::window::shard_rows(index, s.count, h).map_err(Error::Invalid)?;
             spec = format!("--shard {index}/{}", s.count);
         }
         if let Some(b) = &self.pixel_bounds {
@@ -302,7 +303,13 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
                 shard: spec.clone(),
                 samples: w.samples.clone(),
             };
-            let shard = shard::build_shard(manifest, &settings, w, film, frame.sums.as_ref());
+            let shard = prism::image::shard::Shard::from_window(
+                manifest,
+                &settings,
+                w,
+                film,
+                frame.sums.as_ref(),
+            );
             prism::image::shard::write_shard(&args.output, &shard)?;
         }
         _ => prism::image::output::write_image(&args.output, film, &png)?,

@@ -6,22 +6,18 @@ use std::path::PathBuf;
 
 use prism::core::error::{Error, Result};
 use prism::core::settings::RenderSettings;
-use prism::core::window::RenderWindow;
-use prism::image::film::{Film, PixelAccumulator};
 use prism::image::output::OutputFormat;
-use prism::image::shard::{self, Manifest, Shard, ShardFile, ShardPart};
+use prism::image::shard::{self, ShardFile};
 
 use crate::args::{ToneMapArg, png_options};
 
 /// Environment variables `--shard auto/N` takes the index from, in this
 /// order: Prism's own, Slurm job arrays', Kubernetes Indexed Jobs'.
-pub const INDEX_VARIABLES: [&str; 3] =
-    ["PRISM_SHARD_INDEX", "SLURM_ARRAY_TASK_ID", "JOB_COMPLETION_INDEX"];
-
-/// Bands of rows per shard: `--shard I/N` cuts the image into `4 N` bands
-/// (fewer for short images) and gives shard `I` bands `I, I + N, ...`, so
-/// that every shard gets rows from all over the image.
-pub const BANDS_PER_SHARD: u32 = 4;
+pub const INDEX_VARIABLES: [&str; 3] = [
+    "PRISM_SHARD_INDEX",
+    "SLURM_ARRAY_TASK_ID",
+    "JOB_COMPLETION_INDEX",
+];
 
 /// `--shard I/N` or `auto/N`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,7 +46,9 @@ pub fn parse_shard(s: &str) -> std::result::Result<ShardSpec, String> {
             .parse()
             .map_err(|_| format!("'{i}' is not a shard index (or auto)"))?;
         if i >= count {
-            return Err(format!("shard index {i} is not below the shard count {count} (indices count from 0)"));
+            return Err(format!(
+                "shard index {i} is not below the shard count {count} (indices count from 0)"
+            ));
         }
         Some(i)
     };
@@ -92,8 +90,12 @@ pub fn parse_samples(s: &str) -> std::result::Result<Range<u32>, String> {
     let (a, b) = s
         .split_once("..")
         .ok_or_else(|| format!("'{s}' is not a sample range A..B"))?;
-    let a: u32 = a.parse().map_err(|_| format!("'{a}' is not a sample index"))?;
-    let b: u32 = b.parse().map_err(|_| format!("'{b}' is not a sample index"))?;
+    let a: u32 = a
+        .parse()
+        .map_err(|_| format!("'{a}' is not a sample index"))?;
+    let b: u32 = b
+        .parse()
+        .map_err(|_| format!("'{b}' is not a sample index"))?;
     if a >= b {
         return Err(format!("'{s}': the range is half-open, so A < B is needed"));
     }
@@ -106,7 +108,9 @@ pub fn auto_index(count: u32) -> Result<u32> {
     for var in INDEX_VARIABLES {
         if let Ok(v) = std::env::var(var) {
             let i: u32 = v.trim().parse().map_err(|_| {
-                Error::Invalid(format!("--shard auto/{count}: {var}={v} is not a shard index"))
+                Error::Invalid(format!(
+                    "--shard auto/{count}: {var}={v} is not a shard index"
+                ))
             })?;
             if i >= count {
                 return Err(Error::Invalid(format!(
@@ -123,39 +127,10 @@ pub fn auto_index(count: u32) -> Result<u32> {
     )))
 }
 
-/// The rows of shard `index` of `count` in an image `height` rows tall:
-/// the image is cut into `min(height, 4 count)` bands, band `b` covering
-/// rows `b h / B .. (b + 1) h / B` (integer division: no band is lost or
-/// shared whatever the sizes), and the shard takes every `count`-th band
-/// from band `index`, adjacent bands joined.
-pub fn shard_rows(index: u32, count: u32, height: u32) -> Result<Vec<Range<u32>>> {
-    if count > height {
-        return Err(Error::Invalid(format!(
-            "--shard {index}/{count}: the image has only {height} rows, so at most {height} shards"
-        )));
-    }
-    let bands = (count * BANDS_PER_SHARD).min(height) as u64;
-    let h = height as u64;
-    let mut rows: Vec<Range<u32>> = Vec::new();
-    for b in (index as u64..bands).step_by(count as usize) {
-        let r = (b * h / bands) as u32..((b + 1) * h / bands) as u32;
-        match rows.last_mut() {
-            Some(last) if last.end == r.start => last.end = r.end,
-            _ => rows.push(r),
-        }
-    }
-    Ok(rows)
-}
-
 /// Everything in the settings that determines the pixels, except the
 /// seed and spp (stored on their own) and the window: shards merge only
 /// when this text agrees.
-pub fn settings_text(
-    s: &RenderSettings,
-    integrator: &str,
-    camera: usize,
-    bvh: &str,
-) -> String {
+pub fn settings_text(s: &RenderSettings, integrator: &str, camera: usize, bvh: &str) -> String {
     format!(
         "size={}x{} max_depth={} min_contribution={:?} transport={} light_samples={} russian_roulette={} integrator={integrator} camera={camera} bvh={bvh}",
         s.width,
@@ -167,44 +142,6 @@ pub fn settings_text(
         s.rr_start_depth
             .map_or("off".to_string(), |d| format!("from {d}")),
     )
-}
-
-/// The shard file of a windowed render: one part per range of rows, with
-/// sums when the shard has only some of the samples.
-pub fn build_shard(
-    manifest: Manifest,
-    settings: &RenderSettings,
-    window: &RenderWindow,
-    film: &Film,
-    sums: Option<&PixelAccumulator>,
-) -> Shard {
-    let sample_shard = window.samples != (0..settings.spp);
-    let width = window.columns.end - window.columns.start;
-    let mut parts = Vec::new();
-    let mut first_row = 0usize;
-    for r in &window.rows {
-        let h = (r.end - r.start) as usize;
-        let span = first_row * width as usize..(first_row + h) * width as usize;
-        parts.push(ShardPart {
-            x0: window.columns.start,
-            y0: r.start,
-            width,
-            height: h as u32,
-            means: film.pixels[span.clone()].to_vec(),
-            sums: if sample_shard {
-                sums.map(|s| s.pixels()[span].to_vec())
-            } else {
-                None
-            },
-        });
-        first_row += h;
-    }
-    Shard {
-        manifest,
-        width: settings.width,
-        height: settings.height,
-        parts,
-    }
 }
 
 /// Options of `prism merge`.
@@ -219,7 +156,12 @@ pub struct MergeArgs {
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
     /// Exposure in stops for PNG output [default: 0].
-    #[arg(long, value_name = "EV", allow_hyphen_values = true, default_value_t = 0.0)]
+    #[arg(
+        long,
+        value_name = "EV",
+        allow_hyphen_values = true,
+        default_value_t = 0.0
+    )]
     exposure: f32,
     /// Tone map for PNG output.
     #[arg(long, value_enum, default_value_t = ToneMapArg::Clamp)]
@@ -272,29 +214,6 @@ pub fn run_merge(args: MergeArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn shard_rows_partition_the_image_and_interleave() {
-        for height in [1u32, 2, 7, 12, 100, 1081] {
-            for count in 1..=height.min(9) {
-                let mut seen = vec![0u32; height as usize];
-                for i in 0..count {
-                    let rows = shard_rows(i, count, height).unwrap();
-                    assert!(!rows.is_empty(), "{i}/{count} of {height}");
-                    for r in rows {
-                        for y in r {
-                            seen[y as usize] += 1;
-                        }
-                    }
-                }
-                assert!(seen.iter().all(|&c| c == 1), "{count} of {height}");
-            }
-        }
-        // Interleaved bands: shard 0 of 2 on 16 rows has 4 bands of 2.
-        assert_eq!(shard_rows(0, 2, 16).unwrap(), vec![0..2, 4..6, 8..10, 12..14]);
-        assert_eq!(shard_rows(0, 1, 16).unwrap(), vec![0..16]);
-        assert!(shard_rows(0, 9, 8).is_err());
-    }
 
     #[test]
     fn specs_parse_and_bad_ones_say_why() {
