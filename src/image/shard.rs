@@ -547,9 +547,18 @@ pub fn merge(shards: &[ShardFile]) -> Result<Film> {
             .map(|(f, _)| (f.shard.manifest.samples.clone(), name(f)))
             .collect();
         if have.is_empty() {
+            let mut given: Vec<String> = shards
+                .iter()
+                .take(8)
+                .map(|f| format!("{} ({})", name(f), f.shard.manifest.shard))
+                .collect();
+            if shards.len() > 8 {
+                given.push(format!("and {} more", shards.len() - 8));
+            }
             return Err(Error::Invalid(format!(
-                "gap: pixel ({x}, {y}) is in none of the {} shard(s) given; a shard is missing",
-                shards.len()
+                "gap: pixel ({x}, {y}) is in none of the {} shard(s) given, a shard is missing (given: {})",
+                shards.len(),
+                given.join(", ")
             )));
         }
         have.sort_by_key(|(r, _)| r.start);
