@@ -35,21 +35,22 @@ impl Film {
     }
 }
 
-/// Scale of the fixed-point pixel sums: one unit is `2^-64` of radiance.
-const FIXED_SCALE: f64 = 18_446_744_073_709_551_616.0; // 2^64
+/// Scale of the fixed-point pixel sums: one unit is `2^-63` of radiance.
+const FIXED_SCALE: f64 = 9_223_372_036_854_775_808.0; // 2^63
 
 /// Largest magnitude a sample channel keeps: larger values (far beyond any
 /// physical radiance) are clamped to it, so that [`MAX_SPP`] samples
-/// summed in fixed point cannot overflow (`2^20 * 2^42 * 2^64 < 2^127`).
+/// summed in fixed point cannot overflow (`2^20 * 2^42 * 2^63 < 2^127`).
 ///
 /// [`MAX_SPP`]: crate::core::settings::MAX_SPP
 pub const MAX_SAMPLE_MAGNITUDE: f32 = 4_398_046_511_104.0; // 2^42
 
-/// One channel of a finite sample in units of `2^-64`, truncated toward
-/// zero: exact for every `f32` of magnitude `2^-40` or more (the bits
-/// below `2^-64` of smaller values are dropped). Equal to
-/// `(v as f64 * 2^64) as i128` for `|v| <= MAX_SAMPLE_MAGNITUDE`, without
-/// the float-to-integer library call.
+/// One channel of a finite sample in units of `2^-63`, truncated toward
+/// zero: exact for every `f32` of magnitude `2^-39` or more (the bits
+/// below `2^-63` of smaller values are dropped). Equal to
+/// `(v as f64 * 2^63) as i128` for `|v| <= MAX_SAMPLE_MAGNITUDE`, but
+/// made from the float's bits (mantissa shifted by its exponent) instead
+/// of the 128-bit library conversion.
 #[inline]
 pub fn to_fixed(v: f32) -> i128 {
     let v = v.clamp(-MAX_SAMPLE_MAGNITUDE, MAX_SAMPLE_MAGNITUDE);
@@ -60,9 +61,9 @@ pub fn to_fixed(v: f32) -> i128 {
         return 0;
     }
     let mantissa = ((bits & 0x7f_ffff) | 0x80_0000) as i128;
-    // v = mantissa * 2^(exponent - 150), so in units of 2^-64 it is
-    // mantissa * 2^(exponent - 86).
-    let shift = exponent - 86;
+    // v = mantissa * 2^(exponent - 150), so in units of 2^-63 it is
+    // mantissa * 2^(exponent - 87).
+    let shift = exponent - 87;
     let magnitude = if shift >= 0 {
         mantissa << shift
     } else if shift > -24 {
@@ -70,15 +71,24 @@ pub fn to_fixed(v: f32) -> i128 {
     } else {
         0
     };
-    if bits >> 31 != 0 {
-        -magnitude
-    } else {
-        magnitude
-    }
+    if bits >> 31 != 0 { -magnitude } else { magnitude }
+}
+
+/// A 128-bit fixed-point sum in radiance, as `f64`: its upper 64 bits
+/// (signed) and its lower 64 bits without the last (which no sum of
+/// samples of magnitude `2^-39` or more has) converted with the cheap
+/// signed conversions and added, then scaled. Exact for a single
+/// non-negative sample; always a fixed sequence of IEEE operations, so
+/// the same sum gives the same bits.
+#[inline]
+fn fixed_to_f64(s: i128) -> f64 {
+    let high = (s >> 64) as i64 as f64;
+    let low = ((s as u64) >> 1) as i64 as f64;
+    (high * 18_446_744_073_709_551_616.0 + low * 2.0) * (1.0 / FIXED_SCALE)
 }
 
 /// One pixel's sum over its finite samples, exact: each sample channel is
-/// converted to a 64.64 fixed-point integer ([`to_fixed`]) and added in
+/// converted to a fixed-point integer of 63 fractional bits ([`to_fixed`]) and added in
 /// 128-bit integers, so the sum does not depend on the order in which
 /// samples are added nor on how they are split into partial sums
 /// ([`PixelSum::merge`]). That is what makes a render split across
@@ -92,13 +102,13 @@ pub struct PixelSum {
 }
 
 impl PixelSum {
-    /// A sum from its parts: the three channel sums in units of `2^-64`
+    /// A sum from its parts: the three channel sums in units of `2^-63`
     /// and the number of samples added (as stored in sample shards).
     pub fn from_parts(sum: [i128; 3], valid: u32) -> Self {
         Self { sum, valid }
     }
 
-    /// The three channel sums in units of `2^-64`.
+    /// The three channel sums in units of `2^-63`.
     pub fn sums(&self) -> [i128; 3] {
         self.sum
     }
@@ -139,20 +149,15 @@ impl PixelSum {
     }
 
     /// The mean of the samples added, black when there are none: each
-    /// exact sum converted to `f64` (its integer and fraction halves, each
-    /// exact when it has at most 53 significant bits, then added),
-    /// divided by the count in `f64` and rounded to `f32`. A fixed
-    /// sequence of IEEE operations, so the same sum always gives the same
-    /// bits; a single sample comes back exactly.
+    /// exact sum converted to `f64`, divided by the count in `f64` and
+    /// rounded to `f32`. A single sample comes back exactly.
     #[inline]
     pub fn mean(&self) -> Color {
         if self.valid == 0 {
             return Color::ZERO;
         }
         let n = self.valid as f64;
-        // `i128 as f64` is a slow library call; the two halves are not.
-        let to_f64 = |s: i128| (s >> 64) as i64 as f64 + s as u64 as f64 * (1.0 / FIXED_SCALE);
-        let channel = |s: i128| (to_f64(s) / n) as f32;
+        let channel = |s: i128| (fixed_to_f64(s) / n) as f32;
         Color::new(
             channel(self.sum[0]),
             channel(self.sum[1]),
@@ -287,7 +292,7 @@ mod tests {
         }
         // The mean is the exact mean to within the roundings to f64 and f32.
         for c in forward.sums() {
-            let split = (c >> 64) as i64 as f64 + c as u64 as f64 / FIXED_SCALE;
+            let split = fixed_to_f64(c);
             let direct = c as f64 / FIXED_SCALE;
             assert!((split - direct).abs() <= direct.abs() * 2f64.powi(-51));
         }
@@ -301,7 +306,7 @@ mod tests {
 
     #[test]
     fn single_samples_come_back_unchanged_and_bad_ones_are_dropped() {
-        for v in [0.18f32, 1.0, 3.0e-7, 12345.678, 2f32.powi(-40)] {
+        for v in [0.18f32, 1.0, 3.0e-7, 12345.678, 2f32.powi(-39), MAX_SAMPLE_MAGNITUDE] {
             let mut p = PixelSum::default();
             assert!(p.add(Color::splat(v)));
             assert_eq!(p.mean(), Color::splat(v));
