@@ -55,6 +55,15 @@ struct FileSettings {
     light_samples: Option<u32>,
     /// Russian roulette start depth; `false` turns it off.
     russian_roulette: Option<FileRoulette>,
+    /// `"sobol"` or `"hash"`.
+    sampler: Option<FileSampler>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileSampler {
+    Sobol,
+    Hash,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -447,6 +456,10 @@ impl Ctx<'_> {
                 FileRoulette::Enabled(true) => Some(crate::core::settings::DEFAULT_RR_START_DEPTH),
                 FileRoulette::Enabled(false) => None,
                 FileRoulette::StartDepth(d) => Some(d),
+            }),
+            sampler: s.sampler.map(|k| match k {
+                FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
+                FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
             }),
         })
     }

@@ -325,6 +325,10 @@ intensity = 60
     ] {
         assert_success(&render(input, &dir.path().join(output), extra));
     }
-    assert_eq!(read("near.exr"), read("far.exr"), "the default origin is the camera");
+    assert_eq!(
+        read("near.exr"),
+        read("far.exr"),
+        "the default origin is the camera"
+    );
     assert_ne!(read("near.exr"), read("far-world.exr"));
 }
