@@ -37,6 +37,9 @@ pub struct RenderSettings {
     /// window's samples, which are the same samples the whole render takes
     /// (see [`crate::core::window`]).
     pub window: Option<RenderWindow>,
+    /// Where the random numbers come from: Owen-scrambled Sobol points
+    /// (stratified per pixel) or independent hashed numbers.
+    pub sampler: crate::core::rng::SamplerKind,
 }
 
 /// How light is transported: the model, orthogonal to the integrator that
@@ -84,6 +87,7 @@ impl Default for RenderSettings {
             light_samples: 1,
             rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
             window: None,
+            sampler: crate::core::rng::SamplerKind::default(),
         }
     }
 }

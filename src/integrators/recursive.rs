@@ -117,7 +117,7 @@ pub fn pixel_sample(
     counters: &mut RenderCounters,
 ) -> Color {
     let pixel = y * settings.width + x;
-    let mut sampler = Sampler::new(settings.seed, pixel, s);
+    let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
     let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
     counters.rays.camera += 1;
     match settings.transport {
@@ -154,7 +154,7 @@ fn render_rows<T: Send>(
     out: &mut [T],
     f: impl Fn(PixelSum) -> T + Sync,
 ) -> RenderCounters {
-    let cam = camera_rays(camera, settings);
+    let cam = camera_rays(scene, camera, settings);
     let map = settings.path_map();
     let window = settings.window();
     let x0 = map.first_column();

@@ -70,6 +70,8 @@ pub struct SettingsDesc {
     pub light_samples: Option<u32>,
     /// Russian roulette start depth; `Some(None)` turns it off.
     pub rr_start_depth: Option<Option<u32>>,
+    /// Random numbers.
+    pub sampler: Option<crate::core::rng::SamplerKind>,
 }
 
 impl SettingsDesc {
@@ -97,6 +99,7 @@ impl SettingsDesc {
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
             window: None,
+            sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
         }
     }
 }

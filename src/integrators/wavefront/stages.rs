@@ -44,7 +44,7 @@ pub fn generate_camera_rays(
     out.clear();
     for local in 0..count {
         let k = paths.path(first + local as u64);
-        let mut sampler = Sampler::new(settings.seed, k.pixel(settings.width), k.sample);
+        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, k.pixel(settings.width), k.sample);
         let ray = camera.ray(film_sample(k.x, k.y, settings.spp, &mut sampler));
         out.push(RayItem {
             ray,
@@ -228,7 +228,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
             return;
         }
         let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
-        let mut sampler = Sampler::new(settings.seed, pixel, sample);
+        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
         let lobes = LobeChoice::new(it);
         if NEE {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
