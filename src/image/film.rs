@@ -35,81 +35,143 @@ impl Film {
     }
 }
 
-/// Scale of the fixed-point pixel sums: one unit is `2^-63` of radiance.
-const FIXED_SCALE: f64 = 9_223_372_036_854_775_808.0; // 2^63
+/// 64-bit words of an [`ExactSum`].
+pub const SUM_WORDS: usize = 5;
 
-/// Largest magnitude a sample channel keeps: larger values (far beyond any
-/// physical radiance) are clamped to it, so that [`MAX_SPP`] samples
-/// summed in fixed point cannot overflow (`2^20 * 2^42 * 2^63 < 2^127`).
-///
-/// [`MAX_SPP`]: crate::core::settings::MAX_SPP
-pub const MAX_SAMPLE_MAGNITUDE: f32 = 4_398_046_511_104.0; // 2^42
+/// An exact sum of `f32` values: a 320-bit two's-complement integer in
+/// units of `2^-149`, the smallest `f32`. Every finite `f32` is an integer
+/// multiple of that unit below `2^277`, so any value converts exactly, and
+/// [`MAX_SPP`](crate::core::settings::MAX_SPP) of the largest still sum
+/// far below `2^319`: the sum is exact over the whole `f32` range, and
+/// independent of the order and grouping of the additions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExactSum(pub [u64; SUM_WORDS]);
 
-/// One channel of a finite sample in units of `2^-63`, truncated toward
-/// zero: exact for every `f32` of magnitude `2^-39` or more (the bits
-/// below `2^-63` of smaller values are dropped). Equal to
-/// `(v as f64 * 2^63) as i128` for `|v| <= MAX_SAMPLE_MAGNITUDE`, but
-/// made from the float's bits (mantissa shifted by its exponent) instead
-/// of the 128-bit library conversion.
-#[inline]
-pub fn to_fixed(v: f32) -> i128 {
-    let v = v.clamp(-MAX_SAMPLE_MAGNITUDE, MAX_SAMPLE_MAGNITUDE);
-    let bits = v.to_bits();
-    let exponent = ((bits >> 23) & 0xff) as i32;
-    if exponent == 0 {
-        // Zero or subnormal: below 2^-126, far below one unit.
-        return 0;
+impl ExactSum {
+    /// Adds a finite `f32`: its 24-bit mantissa, shifted to its exponent,
+    /// lands on two adjacent words, with the carry (or borrow) rippling up.
+    #[inline]
+    pub fn add(&mut self, v: f32) {
+        let bits = v.to_bits();
+        let exponent = (bits >> 23) & 0xff;
+        let fraction = (bits & 0x7f_ffff) as u64;
+        let mantissa = if exponent == 0 {
+            fraction
+        } else {
+            fraction | 0x80_0000
+        };
+        if mantissa == 0 {
+            return;
+        }
+        // v = mantissa * 2^(max(exponent, 1) - 150) = mantissa units << p.
+        let p = exponent.max(1) - 1;
+        let (i, shift) = ((p / 64) as usize, p % 64);
+        let low = mantissa << shift;
+        let high = if shift == 0 { 0 } else { mantissa >> (64 - shift) };
+        let w = &mut self.0;
+        // p <= 253, so i <= 3 and the two words exist.
+        if bits >> 31 == 0 {
+            let (a, c0) = w[i].overflowing_add(low);
+            let (b, c1) = w[i + 1].overflowing_add(high);
+            let (b, c2) = b.overflowing_add(c0 as u64);
+            w[i] = a;
+            w[i + 1] = b;
+            let mut carry = c1 | c2;
+            for x in &mut w[i + 2..] {
+                if !carry {
+                    break;
+                }
+                (*x, carry) = x.overflowing_add(1);
+            }
+        } else {
+            let (a, b0) = w[i].overflowing_sub(low);
+            let (b, b1) = w[i + 1].overflowing_sub(high);
+            let (b, b2) = b.overflowing_sub(b0 as u64);
+            w[i] = a;
+            w[i + 1] = b;
+            let mut borrow = b1 | b2;
+            for x in &mut w[i + 2..] {
+                if !borrow {
+                    break;
+                }
+                (*x, borrow) = x.overflowing_sub(1);
+            }
+        }
     }
-    let mantissa = ((bits & 0x7f_ffff) | 0x80_0000) as i128;
-    // v = mantissa * 2^(exponent - 150), so in units of 2^-63 it is
-    // mantissa * 2^(exponent - 87).
-    let shift = exponent - 87;
-    let magnitude = if shift >= 0 {
-        mantissa << shift
-    } else if shift > -24 {
-        mantissa >> -shift
-    } else {
-        0
-    };
-    if bits >> 31 != 0 { -magnitude } else { magnitude }
+
+    /// True when negative.
+    fn is_negative(&self) -> bool {
+        self.0[SUM_WORDS - 1] >> 63 != 0
+    }
+
+    /// The sum of two exact sums; `None` on overflow (which sums of valid
+    /// samples never reach).
+    pub fn checked_add(&self, other: &ExactSum) -> Option<ExactSum> {
+        let mut out = [0u64; SUM_WORDS];
+        let mut carry = false;
+        for (k, o) in out.iter_mut().enumerate() {
+            let (a, c0) = self.0[k].overflowing_add(other.0[k]);
+            let (a, c1) = a.overflowing_add(carry as u64);
+            *o = a;
+            carry = c0 | c1;
+        }
+        let out = ExactSum(out);
+        let same_sign = self.is_negative() == other.is_negative();
+        (!same_sign || out.is_negative() == self.is_negative()).then_some(out)
+    }
+
+    /// The sum as `f64`: the magnitude's words converted and scaled from
+    /// the highest down, then signed. A fixed sequence of IEEE operations,
+    /// so the same sum always gives the same bits; a single `f32`
+    /// converts exactly (its bits lie in two words whose values, and whose
+    /// sum, need at most 24 significant bits).
+    pub fn to_f64(&self) -> f64 {
+        let negative = self.is_negative();
+        let mut m = self.0;
+        if negative {
+            let mut carry = true;
+            for x in &mut m {
+                (*x, carry) = (!*x).overflowing_add(carry as u64);
+            }
+        }
+        // 2^(64 k - 149) for word k.
+        const SCALE: [f64; SUM_WORDS] = [
+            1.401298464324817e-45,
+            2.5849394142282115e-26,
+            4.76837158203125e-7,
+            8_796_093_022_208.0,
+            1.6225927682921336e32,
+        ];
+        let mut f = 0.0;
+        for k in (0..SUM_WORDS).rev() {
+            f += m[k] as f64 * SCALE[k];
+        }
+        if negative { -f } else { f }
+    }
 }
 
-/// A 128-bit fixed-point sum in radiance, as `f64`: its upper 64 bits
-/// (signed) and its lower 64 bits without the last (which no sum of
-/// samples of magnitude `2^-39` or more has) converted with the cheap
-/// signed conversions and added, then scaled. Exact for a single
-/// non-negative sample; always a fixed sequence of IEEE operations, so
-/// the same sum gives the same bits.
-#[inline]
-fn fixed_to_f64(s: i128) -> f64 {
-    let high = (s >> 64) as i64 as f64;
-    let low = ((s as u64) >> 1) as i64 as f64;
-    (high * 18_446_744_073_709_551_616.0 + low * 2.0) * (1.0 / FIXED_SCALE)
-}
-
-/// One pixel's sum over its finite samples, exact: each sample channel is
-/// converted to a fixed-point integer of 63 fractional bits ([`to_fixed`]) and added in
-/// 128-bit integers, so the sum does not depend on the order in which
-/// samples are added nor on how they are split into partial sums
+/// One pixel's sum over its finite samples, exact: each channel is an
+/// [`ExactSum`], so the sum does not depend on the order in which samples
+/// are added nor on how they are split into partial sums
 /// ([`PixelSum::merge`]). That is what makes a render split across
 /// threads, batches, progressive frames, image regions or sample ranges
 /// bit for bit the render done at once: every path ends in the same
 /// [`PixelSum::mean`] of the same exact sum.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PixelSum {
-    sum: [i128; 3],
+    sum: [ExactSum; 3],
     valid: u32,
 }
 
 impl PixelSum {
-    /// A sum from its parts: the three channel sums in units of `2^-63`
-    /// and the number of samples added (as stored in sample shards).
-    pub fn from_parts(sum: [i128; 3], valid: u32) -> Self {
+    /// A sum from its parts: the three channel sums and the number of
+    /// samples added (as stored in sample shards).
+    pub fn from_parts(sum: [ExactSum; 3], valid: u32) -> Self {
         Self { sum, valid }
     }
 
-    /// The three channel sums in units of `2^-63`.
-    pub fn sums(&self) -> [i128; 3] {
+    /// The three channel sums.
+    pub fn sums(&self) -> [ExactSum; 3] {
         self.sum
     }
 
@@ -126,9 +188,9 @@ impl PixelSum {
         if !sample.is_finite() {
             return false;
         }
-        self.sum[0] += to_fixed(sample.x);
-        self.sum[1] += to_fixed(sample.y);
-        self.sum[2] += to_fixed(sample.z);
+        self.sum[0].add(sample.x);
+        self.sum[1].add(sample.y);
+        self.sum[2].add(sample.z);
         self.valid += 1;
         true
     }
@@ -140,9 +202,9 @@ impl PixelSum {
     pub fn merge(&self, other: &PixelSum) -> Option<PixelSum> {
         Some(PixelSum {
             sum: [
-                self.sum[0].checked_add(other.sum[0])?,
-                self.sum[1].checked_add(other.sum[1])?,
-                self.sum[2].checked_add(other.sum[2])?,
+                self.sum[0].checked_add(&other.sum[0])?,
+                self.sum[1].checked_add(&other.sum[1])?,
+                self.sum[2].checked_add(&other.sum[2])?,
             ],
             valid: self.valid.checked_add(other.valid)?,
         })
@@ -157,7 +219,7 @@ impl PixelSum {
             return Color::ZERO;
         }
         let n = self.valid as f64;
-        let channel = |s: i128| (fixed_to_f64(s) / n) as f32;
+        let channel = |s: ExactSum| (s.to_f64() / n) as f32;
         Color::new(
             channel(self.sum[0]),
             channel(self.sum[1]),
@@ -233,22 +295,21 @@ mod tests {
     use super::*;
     use crate::core::rng::Sampler;
 
+    /// The value of an exact sum as an exact rational: an `i128` count of
+    /// `2^-149` units, for sums small enough (brute-force reference).
+    fn as_units(s: &ExactSum) -> Option<i128> {
+        let w = s.0;
+        let top = ((w[1] as i64) >> 63) as u64;
+        (w[2] == top && w[3] == top && w[4] == top)
+            .then(|| ((w[1] as u128) << 64 | w[0] as u128) as i128)
+    }
+
     #[test]
-    fn fixed_point_matches_the_float_conversion() {
-        // Brute-force cross-check against the library conversion over
-        // random bit patterns of every exponent, and the edges.
+    fn exact_sums_match_integer_arithmetic_and_convert_back_exactly() {
         let mut r = Sampler::new(3, 0, 0);
-        let mut values = vec![
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            f32::MIN_POSITIVE,
-            1e-30,
-            2f32.powi(-40),
-        ];
-        values.extend([MAX_SAMPLE_MAGNITUDE, -MAX_SAMPLE_MAGNITUDE, 1e13, -1e30]);
-        for _ in 0..200_000 {
+        let mut values = vec![0.0, -0.0, 1.0, -1.0, f32::MIN_POSITIVE, 1e-45, -1e-45, 1e-30];
+        values.extend([f32::MAX, -f32::MAX, 1e30, -3.0e-39]);
+        for _ in 0..100_000 {
             let hi = (r.next_f32() * 65536.0) as u32;
             let lo = (r.next_f32() * 65536.0) as u32;
             let v = f32::from_bits(hi << 16 | lo);
@@ -256,11 +317,37 @@ mod tests {
                 values.push(v);
             }
         }
-        for v in values {
-            let c = v.clamp(-MAX_SAMPLE_MAGNITUDE, MAX_SAMPLE_MAGNITUDE);
-            let expected = (c as f64 * FIXED_SCALE) as i128;
-            assert_eq!(to_fixed(v), expected, "{v:e}");
+        for &v in &values {
+            // Every finite f32 comes back exactly from its exact sum.
+            let mut s = ExactSum::default();
+            s.add(v);
+            assert_eq!(s.to_f64(), v as f64, "{v:e}");
+            // Adding and subtracting it leaves zero; x + x is 2x.
+            let mut z = s;
+            z.add(-v);
+            assert_eq!(z, ExactSum::default(), "{v:e}");
+            s.add(v);
+            assert_eq!(s.to_f64(), 2.0 * v as f64, "{v:e}");
         }
+        // Against 128-bit integer arithmetic on values below 2^-40 (whose
+        // sums fit in 127 bits of 2^-149 units).
+        let mut acc = ExactSum::default();
+        let mut units: i128 = 0;
+        for &v in values.iter().filter(|v| v.abs() < 2f32.powi(-40)) {
+            acc.add(v);
+            units += (v as f64 * 2f64.powi(149)) as i128;
+        }
+        assert_eq!(as_units(&acc), Some(units));
+        // The largest values MAX_SPP times do not overflow.
+        let mut big = ExactSum::default();
+        big.add(f32::MAX);
+        let mut sum = big;
+        for _ in 0..20 {
+            sum = sum.checked_add(&sum).unwrap();
+        }
+        assert_eq!(sum.to_f64(), f32::MAX as f64 * 1048576.0);
+        let huge = ExactSum([u64::MAX, u64::MAX, u64::MAX, u64::MAX, u64::MAX >> 1]);
+        assert_eq!(huge.checked_add(&big), None);
     }
 
     #[test]
@@ -291,11 +378,7 @@ mod tests {
             assert_eq!(b.merge(&a), Some(forward));
         }
         // The mean is the exact mean to within the roundings to f64 and f32.
-        for c in forward.sums() {
-            let split = fixed_to_f64(c);
-            let direct = c as f64 / FIXED_SCALE;
-            assert!((split - direct).abs() <= direct.abs() * 2f64.powi(-51));
-        }
+
         let exact: f64 = samples.iter().map(|c| c.y as f64).sum::<f64>() / 1000.0;
         let m = forward.mean().y as f64;
         assert!(
@@ -306,7 +389,7 @@ mod tests {
 
     #[test]
     fn single_samples_come_back_unchanged_and_bad_ones_are_dropped() {
-        for v in [0.18f32, 1.0, 3.0e-7, 12345.678, 2f32.powi(-39), MAX_SAMPLE_MAGNITUDE] {
+        for v in [0.18f32, 1.0, 3.0e-7, 12345.678, 1e-30, 1e30, -2.5, f32::MAX] {
             let mut p = PixelSum::default();
             assert!(p.add(Color::splat(v)));
             assert_eq!(p.mean(), Color::splat(v));
@@ -315,11 +398,7 @@ mod tests {
         assert!(!p.add(Color::new(f32::NAN, 0.0, 0.0)));
         assert!(!p.add(Color::new(0.0, f32::INFINITY, 0.0)));
         assert_eq!((p.count(), p.mean()), (0, Color::ZERO));
-        // Huge samples are clamped, so the largest sums still fit.
-        let mut big = PixelSum::default();
-        big.add(Color::splat(f32::MAX));
-        assert_eq!(big.mean(), Color::splat(MAX_SAMPLE_MAGNITUDE));
-        let huge = PixelSum::from_parts([i128::MAX; 3], 1);
-        assert_eq!(huge.merge(&big), None);
+        let huge = PixelSum::from_parts([ExactSum([0, 0, 0, 0, u64::MAX >> 1]); 3], 1);
+        assert_eq!(huge.merge(&huge), None);
     }
 }

@@ -13,9 +13,9 @@
 //! over the shard's samples, which for a shard of all `spp` samples is the
 //! final pixel, bit for bit. A shard of fewer samples (a *sample shard*)
 //! also stores each pixel's exact sum and count, which is what merging
-//! adds up: `count` (32-bit unsigned) and, per colour channel `C`, the four
-//! 32-bit words of its 128-bit fixed-point sum, least significant first,
-//! as `sum.C.0` to `sum.C.3` (see [`PixelSum`]).
+//! adds up: `count` (32-bit unsigned) and, per colour channel `C`, the ten
+//! 32-bit words of its 320-bit exact sum, least significant first, as
+//! `sum.C.0` to `sum.C.9` (see [`ExactSum`]).
 //!
 //! [`merge`] checks that a set of shards belongs to one render and covers
 //! every pixel's samples exactly once, then returns the image: exactly the
@@ -36,7 +36,7 @@ use crate::core::error::{Error, Result};
 use crate::core::math::Color;
 use crate::core::settings::{MAX_PIXELS, MAX_SPP, RenderSettings};
 use crate::core::window::RenderWindow;
-use crate::image::film::{Film, PixelAccumulator, PixelSum};
+use crate::image::film::{ExactSum, Film, PixelAccumulator, PixelSum, SUM_WORDS};
 use crate::image::output::write_atomic;
 
 /// Header attribute names of the manifest.
@@ -208,10 +208,10 @@ pub fn write_shard(path: &Path, shard: &Shard) -> Result<()> {
                 FlatSamples::U32(sums.iter().map(|s| s.count()).collect()),
             ));
             for (c, name) in SUM_CHANNELS.iter().enumerate() {
-                for word in 0..4 {
+                for word in 0..2 * SUM_WORDS {
                     let values = sums
                         .iter()
-                        .map(|s| (s.sums()[c] as u128 >> (32 * word)) as u32)
+                        .map(|s| (s.sums()[c].0[word / 2] >> (32 * (word % 2))) as u32)
                         .collect();
                     channels.push(AnyChannel::new(
                         format!("sum.{name}.{word}").as_str(),
@@ -264,7 +264,7 @@ pub fn read_shard(path: &Path) -> Result<Shard> {
         .map_err(|e| bad(format!("not a readable OpenEXR file: {e}")))?;
     for h in &meta.headers {
         let size = h.layer_size;
-        if size.area() as u64 > MAX_PIXELS || h.channels.list.len() > 16 {
+        if size.area() as u64 > MAX_PIXELS || h.channels.list.len() > 40 {
             return Err(bad("not a Prism shard: a part is too large".into()));
         }
     }
@@ -376,7 +376,7 @@ pub fn read_shard(path: &Path) -> Result<Shard> {
             let words: Vec<Vec<&Vec<u32>>> = SUM_CHANNELS
                 .iter()
                 .map(|c| {
-                    (0..4)
+                    (0..2 * SUM_WORDS)
                         .map(|w| u32s(&format!("sum.{c}.{w}")))
                         .collect::<Result<Vec<_>>>()
                 })
@@ -391,7 +391,9 @@ pub fn read_shard(path: &Path) -> Result<Shard> {
                     )));
                 }
                 let channel = |c: usize| {
-                    (0..4).fold(0u128, |acc, w| acc | (words[c][w][k] as u128) << (32 * w)) as i128
+                    ExactSum(std::array::from_fn(|w| {
+                        words[c][2 * w][k] as u64 | (words[c][2 * w + 1][k] as u64) << 32
+                    }))
                 };
                 sums.push(PixelSum::from_parts(
                     [channel(0), channel(1), channel(2)],
