@@ -25,6 +25,7 @@ pub struct RenderWindow {
 
 impl RenderWindow {
     /// The whole `width` x `height` image with all `spp` samples.
+    #[allow(clippy::single_range_in_vec_init)] // one range of rows, meant
     pub fn full(width: u32, height: u32, spp: u32) -> Self {
         Self {
             columns: 0..width,

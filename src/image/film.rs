@@ -120,8 +120,8 @@ impl ExactSum {
         (!same_sign || out.is_negative() == self.is_negative()).then_some(out)
     }
 
-    /// The sum as `f64`: the magnitude's words converted and scaled from
-    /// the highest down, then signed. A fixed sequence of IEEE operations,
+    /// The sum as `f64`: the magnitude's two highest non-zero words
+    /// converted and scaled, then signed. A fixed sequence of IEEE operations,
     /// so the same sum always gives the same bits; a single `f32`
     /// converts exactly (its bits lie in two words whose values, and whose
     /// sum, need at most 24 significant bits).
@@ -142,9 +142,15 @@ impl ExactSum {
             8_796_093_022_208.0,
             1.6225927682921336e32,
         ];
-        let mut f = 0.0;
-        for k in (0..SUM_WORDS).rev() {
-            f += m[k] as f64 * SCALE[k];
+        // The highest non-zero word and the one below it carry at least 64
+        // significant bits, more than an f64 keeps; lower words change the
+        // result by less than 2^-64 of it and are left out.
+        let Some(k) = (0..SUM_WORDS).rev().find(|&k| m[k] != 0) else {
+            return 0.0;
+        };
+        let mut f = m[k] as f64 * SCALE[k];
+        if k > 0 {
+            f += m[k - 1] as f64 * SCALE[k - 1];
         }
         if negative { -f } else { f }
     }

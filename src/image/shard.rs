@@ -349,7 +349,7 @@ pub fn read_shard(path: &Path) -> Result<Shard> {
                 .channel_data
                 .list
                 .iter()
-                .find(|c| c.name == Text::from(name))
+                .find(|c| c.name == *name)
                 .map(|c| &c.sample_data)
                 .filter(|d| d.len() == n)
         };

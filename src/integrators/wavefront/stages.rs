@@ -254,6 +254,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
 /// Stage: shades the hits of `class` with the kernel for the lobes the
 /// class has ([`MaterialClass::is_lit`], [`MaterialClass::scatters`]) and
 /// the settings' transport; `first` is the batch's first path.
+#[allow(clippy::too_many_arguments)]
 pub fn shade_class(
     class: MaterialClass,
     scene: &RenderScene,
