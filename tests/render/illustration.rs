@@ -2,7 +2,9 @@
 //! both integrators, feature lines from ray casting, and their vector form.
 
 use glam::DVec3;
-use prism::core::settings::Style;
+use prism::core::settings::{LineSettings, RenderSettings, Style};
+use prism::image::lines::LineOverlay;
+use prism::image::output::{PngOptions, write_image_with_lines};
 use prism::io::desc::SettingsDesc;
 use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
@@ -126,4 +128,381 @@ fn gooch_sphere_matches_the_closed_form_at_every_pixel_in_both_integrators() {
     }
     // The sphere shows the whole range of tones.
     assert!(n_dot_l_range.0 < -0.9 && n_dot_l_range.1 > 0.9, "{n_dot_l_range:?}");
+}
+
+// ---------------------------------------------------------------------------
+// Feature lines
+
+/// A pinhole camera in f64, built as `CameraRays` builds it: the
+/// independent projection the line tests compare against.
+struct Pinhole {
+    eye: DVec3,
+    right: DVec3,
+    up: DVec3,
+    forward: DVec3,
+    half_w: f64,
+    half_h: f64,
+    w: f64,
+    h: f64,
+}
+
+impl Pinhole {
+    fn new(eye: [f64; 3], at: [f64; 3], vfov: f64, w: u32, h: u32) -> Self {
+        let eye = DVec3::from(eye);
+        let forward = (DVec3::from(at) - eye).normalize();
+        let right = forward.cross(DVec3::Y).normalize();
+        let up = right.cross(forward);
+        let half_h = (vfov.to_radians() * 0.5).tan();
+        Self {
+            eye,
+            right,
+            up,
+            forward,
+            half_w: half_h * w as f64 / h as f64,
+            half_h,
+            w: w as f64,
+            h: h as f64,
+        }
+    }
+
+    /// Film position in pixels of world point `p`.
+    fn project(&self, p: DVec3) -> glam::DVec2 {
+        let d = p - self.eye;
+        let z = d.dot(self.forward);
+        let (x, y) = (d.dot(self.right) / z, d.dot(self.up) / z);
+        glam::DVec2::new(
+            (x + self.half_w) / (2.0 * self.half_w) * self.w,
+            (self.half_h - y) / (2.0 * self.half_h) * self.h,
+        )
+    }
+}
+
+/// Distance from `p` to the segment `a`-`b`.
+fn to_segment(p: glam::DVec2, a: glam::DVec2, b: glam::DVec2) -> f64 {
+    let d = b - a;
+    let t = ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+    (a + d * t - p).length()
+}
+
+/// Settings at `w` x `h` with lines of width 1 and crease angle `crease`.
+fn line_settings(w: u32, h: u32, crease: f32) -> RenderSettings {
+    RenderSettings {
+        width: w,
+        height: h,
+        lines: Some(LineSettings {
+            crease_degrees: crease,
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+fn overlay(toml: &str, s: &RenderSettings, kind: IntegratorKind) -> LineOverlay {
+    let frame = render_desc(load_toml(toml).unwrap(), config(s.clone(), kind));
+    frame.lines.expect("lines were asked for")
+}
+
+const SPHERE_AT_FIVE: &str = r#"
+[camera]
+look_from = [0, 0, 5]
+look_at = [0, 0, 0]
+vfov = 40
+[[objects]]
+shape = { type = "sphere", radius = 1.0 }
+[[lights]]
+type = "point"
+position = [2, 3, 4]
+intensity = 20
+"#;
+
+#[test]
+fn sphere_silhouette_is_the_circle_of_angular_radius_asin_r_over_d() {
+    let (w, h) = (96u32, 96u32);
+    let lines = overlay(SPHERE_AT_FIVE, &line_settings(w, h, 45.57), IntegratorKind::Recursive);
+    let cam = Pinhole::new([0.0, 0.0, 5.0], [0.0; 3], 40.0, w, h);
+    // The silhouette's angular radius asin(r/d), on the image plane.
+    let rho = (1.0f64 / 5.0).asin().tan() / cam.half_h * h as f64 / 2.0;
+    let centre = glam::DVec2::new(w as f64 / 2.0, h as f64 / 2.0);
+    let mut inked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if lines.get(x, y) > 0.0 {
+                inked += 1;
+                let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let off = ((p - centre).length() - rho).abs();
+                assert!(off <= 1.0, "line pixel ({x}, {y}) is {off} px off the circle");
+            }
+        }
+    }
+    // Covered without gaps: the pixel under every point of the circle is ink.
+    for k in 0..1440 {
+        let phi = k as f64 / 1440.0 * std::f64::consts::TAU;
+        let p = centre + glam::DVec2::new(phi.cos(), phi.sin()) * rho;
+        let (x, y) = (p.x.floor() as u32, p.y.floor() as u32);
+        assert!(lines.get(x, y) > 0.0, "gap at angle {phi}: pixel ({x}, {y})");
+    }
+    // About one pixel wide: the ring's area is 2 pi rho pixels.
+    let ring = std::f64::consts::TAU * rho;
+    assert!((inked as f64) < 2.5 * ring, "{inked} inked pixels for a ring of {ring}");
+}
+
+/// A flat-shaded cube of side 2 at the origin in three-quarter view.
+const CUBE: &str = r#"
+[camera]
+look_from = [3, 2.5, 4]
+look_at = [0, 0, 0]
+vfov = 40
+[[objects]]
+shape = { type = "mesh", smooth = false, positions = [[-1,-1,-1],[1,-1,-1],[1,1,-1],[-1,1,-1],[-1,-1,1],[1,-1,1],[1,1,1],[-1,1,1]], indices = [[0,2,1],[0,3,2],[4,5,6],[4,6,7],[0,1,5],[0,5,4],[3,7,6],[3,6,2],[0,4,7],[0,7,3],[1,2,6],[1,6,5]] }
+material = { color = [0.8, 0.2, 0.2] }
+[[lights]]
+type = "directional"
+direction = [-1, -2, -1]
+illuminance = 3
+"#;
+
+/// The cube's corners and its edges as corner pairs.
+fn cube_edges() -> Vec<(DVec3, DVec3)> {
+    let c = |i: usize| {
+        DVec3::new(
+            if i & 1 == 0 { -1.0 } else { 1.0 },
+            if i & 2 == 0 { -1.0 } else { 1.0 },
+            if i & 4 == 0 { -1.0 } else { 1.0 },
+        )
+    };
+    let mut v = Vec::new();
+    for i in 0..8 {
+        for bit in [1, 2, 4] {
+            if i & bit == 0 {
+                v.push((c(i), c(i | bit)));
+            }
+        }
+    }
+    v
+}
+
+/// The cube's edges seen from (3, 2.5, 4): the 3 interior edges meeting at
+/// the near corner (1, 1, 1), the 6 outline edges, and the 3 hidden ones
+/// meeting at (-1, -1, -1).
+fn classified_cube_edges() -> (Vec<(DVec3, DVec3)>, Vec<(DVec3, DVec3)>, Vec<(DVec3, DVec3)>) {
+    let near = DVec3::ONE;
+    let far = -DVec3::ONE;
+    let (mut interior, mut outline, mut hidden) = (Vec::new(), Vec::new(), Vec::new());
+    for e in cube_edges() {
+        if e.0 == near || e.1 == near {
+            interior.push(e);
+        } else if e.0 == far || e.1 == far {
+            hidden.push(e);
+        } else {
+            outline.push(e);
+        }
+    }
+    (interior, outline, hidden)
+}
+
+#[test]
+fn cube_shows_its_three_interior_edges_exactly_below_ninety_degrees() {
+    let (w, h) = (120u32, 90u32);
+    let cam = Pinhole::new([3.0, 2.5, 4.0], [0.0; 3], 40.0, w, h);
+    let (interior, outline, _) = classified_cube_edges();
+    let proj = |e: &(DVec3, DVec3)| (cam.project(e.0), cam.project(e.1));
+    let near_any = |p: glam::DVec2, edges: &[(DVec3, DVec3)], tol: f64| {
+        edges.iter().any(|e| {
+            let (a, b) = proj(e);
+            to_segment(p, a, b) <= tol
+        })
+    };
+    for crease in [10.0, 45.57, 89.0, 90.0, 120.0, 180.0] {
+        let lines = overlay(CUBE, &line_settings(w, h, crease), IntegratorKind::Recursive);
+        let mut interior_ink = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                if lines.get(x, y) == 0.0 || near_any(p, &outline, 1.5) {
+                    continue;
+                }
+                interior_ink += 1;
+                assert!(
+                    crease < 90.0 && near_any(p, &interior, 1.0),
+                    "crease {crease}: ink at ({x}, {y}) off every interior edge"
+                );
+            }
+        }
+        if crease < 90.0 {
+            // Every interior edge is drawn along its whole length (away
+            // from the outline).
+            for e in &interior {
+                let (a, b) = proj(e);
+                for k in 1..40 {
+                    let p = a + (b - a) * (k as f64 / 40.0);
+                    if near_any(p, &outline, 2.0) {
+                        continue;
+                    }
+                    let (x, y) = (p.x.floor() as u32, p.y.floor() as u32);
+                    assert!(lines.get(x, y) > 0.0, "crease {crease}: gap at ({x}, {y})");
+                }
+            }
+            assert!(interior_ink > 50, "crease {crease}: {interior_ink}");
+        } else {
+            assert_eq!(interior_ink, 0, "crease {crease}");
+        }
+    }
+}
+
+/// A UV sphere mesh of radius 1 with `segments` x `rings` quads as TOML
+/// arrays: positions and indices.
+fn uv_sphere(segments: usize, rings: usize) -> (String, String) {
+    let mut pos = Vec::new();
+    for r in 0..=rings {
+        let theta = std::f64::consts::PI * r as f64 / rings as f64;
+        for s in 0..segments {
+            let phi = std::f64::consts::TAU * s as f64 / segments as f64;
+            pos.push(format!(
+                "[{:.7},{:.7},{:.7}]",
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin()
+            ));
+        }
+    }
+    let mut idx = Vec::new();
+    for r in 0..rings {
+        for s in 0..segments {
+            let a = r * segments + s;
+            let b = r * segments + (s + 1) % segments;
+            let (c, d) = (a + segments, b + segments);
+            idx.push(format!("[{a},{b},{d}]"));
+            idx.push(format!("[{a},{d},{c}]"));
+        }
+    }
+    (pos.join(","), idx.join(","))
+}
+
+#[test]
+fn smooth_sphere_mesh_has_no_crease_lines_inside_its_outline() {
+    let (w, h) = (96u32, 96u32);
+    let (pos, idx) = uv_sphere(48, 24);
+    let toml = format!(
+        r#"
+[camera]
+look_from = [0, 0, 5]
+look_at = [0, 0, 0]
+vfov = 40
+[[objects]]
+shape = {{ type = "mesh", smooth = true, positions = [{pos}], indices = [{idx}] }}
+[[lights]]
+type = "point"
+position = [2, 3, 4]
+intensity = 20
+"#
+    );
+    let lines = overlay(&toml, &line_settings(w, h, 45.57), IntegratorKind::Recursive);
+    let cam = Pinhole::new([0.0, 0.0, 5.0], [0.0; 3], 40.0, w, h);
+    let rho = (1.0f64 / 5.0).asin().tan() / cam.half_h * h as f64 / 2.0;
+    let centre = glam::DVec2::new(w as f64 / 2.0, h as f64 / 2.0);
+    let mut inked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if lines.get(x, y) > 0.0 {
+                inked += 1;
+                let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                // The polygonal outline is within 0.3% of the circle.
+                let off = (p - centre).length() - rho;
+                assert!(off.abs() <= 1.5, "ink at ({x}, {y}), {off} px from the outline");
+            }
+        }
+    }
+    assert!(inked > 100, "the outline is drawn: {inked}");
+}
+
+#[test]
+fn lines_do_not_depend_on_lighting_spp_threads_or_integrator_and_run_only_when_asked() {
+    let (w, h) = (64u32, 48u32);
+    let base = line_settings(w, h, 45.57);
+    let reference = overlay(CUBE, &base, IntegratorKind::Recursive);
+    assert!(reference.inked_pixels() > 100);
+    let other_light = CUBE.replace("direction = [-1, -2, -1]", "direction = [2, -1, 0.5]")
+        .replace("illuminance = 3", "illuminance = 300");
+    assert_eq!(overlay(&other_light, &base, IntegratorKind::Recursive), reference, "lighting");
+    let spp = RenderSettings { spp: 4, seed: 9, ..base.clone() };
+    assert_eq!(overlay(CUBE, &spp, IntegratorKind::Recursive), reference, "spp");
+    assert_eq!(overlay(CUBE, &base, IntegratorKind::Wavefront), reference, "integrator");
+    let gooch = RenderSettings { style: Style::Gooch, ..base.clone() };
+    assert_eq!(overlay(CUBE, &gooch, IntegratorKind::Wavefront), reference, "style");
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let l = pool.install(|| overlay(CUBE, &base, IntegratorKind::Recursive));
+        assert_eq!(l, reference, "{threads} threads");
+    }
+    // No lines asked for: no line stage, no line rays.
+    let frame = render_desc(
+        load_toml(CUBE).unwrap(),
+        config(RenderSettings { lines: None, ..base.clone() }, IntegratorKind::Recursive),
+    );
+    assert!(frame.lines.is_none() && frame.line_rays == 0);
+    // Exposure: fully inked pixels keep the ink colour in the PNG (lines
+    // two pixels wide, to have some).
+    let wide = RenderSettings {
+        lines: Some(LineSettings { width: 2.0, ..Default::default() }),
+        ..base.clone()
+    };
+    let frame = render_desc(load_toml(CUBE).unwrap(), config(wide, IntegratorKind::Recursive));
+    let dir = tempfile::tempdir().unwrap();
+    let mut codes = Vec::new();
+    for ev in [0.0, 4.0] {
+        let path = dir.path().join(format!("ev{ev}.png"));
+        let opts = PngOptions { exposure: ev, ..Default::default() };
+        write_image_with_lines(&path, frame.film.as_ref().unwrap(), frame.lines.as_ref(), &opts)
+            .unwrap();
+        codes.push(image::open(&path).unwrap().to_rgb8());
+    }
+    let l = frame.lines.as_ref().unwrap();
+    let full: Vec<(u32, u32)> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| l.get(x, y) == 1.0)
+        .collect();
+    assert!(full.len() > 20);
+    for (x, y) in full {
+        for c in &codes {
+            assert_eq!(c.get_pixel(x, y).0, [0, 0, 0], "ink at ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn lines_are_seen_in_a_mirror() {
+    // The camera looks at a mirror square; the only object, a sphere, is
+    // behind the camera, seen in the mirror alone.
+    let toml = r#"
+[settings]
+background = [1, 1, 1]
+[camera]
+look_from = [0, 0, 4]
+look_at = [0, 0, 0]
+vfov = 40
+[[objects]]
+shape = { type = "polygon", vertices = [[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]] }
+material = { diffuse = 0, mirror = 1 }
+[[objects]]
+shape = { type = "sphere", radius = 1.0 }
+translate = [0, 0, 6]
+"#;
+    let (w, h) = (96u32, 96u32);
+    let lines = overlay(toml, &line_settings(w, h, 45.57), IntegratorKind::Recursive);
+    // The reflected sphere is a sphere of radius 1 at distance 10.
+    let cam = Pinhole::new([0.0, 0.0, 4.0], [0.0; 3], 40.0, w, h);
+    let rho = (1.0f64 / 10.0).asin().tan() / cam.half_h * h as f64 / 2.0;
+    let centre = glam::DVec2::new(w as f64 / 2.0, h as f64 / 2.0);
+    let mut inked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if lines.get(x, y) > 0.0 {
+                inked += 1;
+                let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let off = ((p - centre).length() - rho).abs();
+                assert!(off <= 1.0, "ink at ({x}, {y}) {off} px off the reflected outline");
+            }
+        }
+    }
+    assert!(inked as f64 > std::f64::consts::TAU * rho * 0.8, "{inked}");
 }
