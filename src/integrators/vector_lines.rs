@@ -107,6 +107,9 @@ pub struct VectorLines {
 /// hits on the edge's own faces at grazing angles.
 pub const VISIBILITY_MARGIN: f32 = 1.0 - 1e-4;
 
+/// Length in pixels below which a visible or hidden piece is left out.
+pub const MIN_PIECE: f32 = 1.0 / 32.0;
+
 /// The line edges of a triangle mesh for an eye at `eye`: `positions` and
 /// `triangles` in world space, `cos_crease` the cosine of the crease angle
 /// (below it two faces make a crease; pass less than -1 for none). Returns
@@ -275,7 +278,10 @@ fn edge_segments(
     }
     for (k, &(start, vis)) in runs.iter().enumerate() {
         let end = runs.get(k + 1).map_or(s1, |r| r.0);
-        if end <= start {
+        // Pieces shorter than MIN_PIECE pixels (a hidden edge's last
+        // fraction of a pixel at a vertex it shares with visible faces)
+        // are left out.
+        if (fb - fa).length() * (end - start) < MIN_PIECE {
             continue;
         }
         out.push(Segment2 {

@@ -5,11 +5,13 @@ use glam::DVec3;
 use prism::core::settings::{LineSettings, RenderSettings, Style};
 use prism::image::lines::LineOverlay;
 use prism::image::output::{PngOptions, write_image_with_lines};
+use prism::integrators::vector_lines::{EdgeKind, VectorLines, to_svg, vector_lines};
 use prism::io::desc::SettingsDesc;
+use prism::scene::camera::CameraRays;
 use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 
-use crate::common::render::{config, render_desc};
+use crate::common::render::{config, render_desc, renderer};
 use crate::common::scenes::load_toml;
 
 /// A unit sphere of base colour (0.8, 0.2, 0.2) at the origin seen from
@@ -505,4 +507,183 @@ translate = [0, 0, 6]
         }
     }
     assert!(inked as f64 > std::f64::consts::TAU * rho * 0.8, "{inked}");
+}
+
+// ---------------------------------------------------------------------------
+// Vector lines
+
+/// The cube with a smooth sphere mesh in front of one corner.
+fn cube_and_sphere_mesh() -> String {
+    let (pos, idx) = uv_sphere(24, 12);
+    format!(
+        r#"{CUBE}
+[[objects]]
+shape = {{ type = "mesh", smooth = true, positions = [{pos}], indices = [{idx}] }}
+translate = [1.6, 1.45, 1.9]
+scale = 0.6
+"#
+    )
+}
+
+/// The vector lines of `toml` at `w` x `h` from its first camera, the
+/// scene they were found in, and the camera.
+fn vectors(toml: &str, w: u32, h: u32) -> (VectorLines, std::sync::Arc<prism::scene::RenderScene>) {
+    let desc = load_toml(toml).unwrap();
+    let camera = desc.cameras[0].clone();
+    let mut r = renderer(desc, config(line_settings(w, h, 45.57), IntegratorKind::Recursive));
+    r.run();
+    let scene = r.scene().unwrap();
+    let rays = CameraRays::new(&camera, w, h);
+    (vector_lines(&scene, &rays, (w, h), 45.57, None), scene)
+}
+
+/// Visibility of world point `p` from `eye` by testing every object and
+/// triangle (no BVH), with a margin of 1e-3 of the distance.
+fn brute_visible(scene: &prism::scene::RenderScene, eye: DVec3, p: DVec3) -> bool {
+    let o = eye.as_vec3a();
+    let ray = prism::core::math::Ray::new(o, p.as_vec3a() - o);
+    scene.intersect_brute_force(&ray, 0.0, 1.0 - 1e-3).is_none()
+}
+
+#[test]
+fn svg_lines_of_a_cube_are_its_projected_edges_with_hidden_ones_classified() {
+    let (w, h) = (160u32, 120u32);
+    let (v, scene) = vectors(CUBE, w, h);
+    let eye = DVec3::new(3.0, 2.5, 4.0);
+    let cam = Pinhole::new(eye.to_array(), [0.0; 3], 40.0, w, h);
+    let (interior, outline, hidden) = classified_cube_edges();
+    let d2 = |p: glam::Vec2| p.as_dvec2();
+    let mut visible_length = vec![0.0; 12];
+    let all: Vec<_> = interior.iter().chain(&outline).chain(&hidden).collect();
+    for s in &v.segments {
+        // Each end is the projection of its world point, within half a pixel.
+        for (end, world) in [(s.a, s.world[0]), (s.b, s.world[1])] {
+            let want = cam.project(world.as_dvec3());
+            assert!((d2(end) - want).length() <= 0.5, "{s:?}: {want}");
+        }
+        // The segment lies on one cube edge, and on its projection.
+        let on = |p: DVec3, e: &(DVec3, DVec3)| {
+            let d = e.1 - e.0;
+            let t = ((p - e.0).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+            (e.0 + d * t - p).length() < 1e-4
+        };
+        let (k, e) = all
+            .iter()
+            .enumerate()
+            .find(|(_, e)| s.world.iter().all(|p| on(p.as_dvec3(), e)))
+            .unwrap_or_else(|| panic!("{s:?} lies on no cube edge"));
+        let (pa, pb) = (cam.project(e.0), cam.project(e.1));
+        assert!(to_segment(d2(s.a), pa, pb) <= 0.5 && to_segment(d2(s.b), pa, pb) <= 0.5);
+        let length = (s.b - s.a).length() as f64;
+        let kind = if k < 3 {
+            EdgeKind::Crease
+        } else if k < 9 {
+            EdgeKind::Silhouette
+        } else {
+            EdgeKind::Crease
+        };
+        assert_eq!(s.kind, kind, "{s:?} on edge {e:?}");
+        if length > 0.25 {
+            // Classified as ray casting says: visible except the hidden three.
+            let mid = (s.world[0].as_dvec3() + s.world[1].as_dvec3()) * 0.5;
+            assert_eq!(s.visible, brute_visible(&scene, eye, mid), "{s:?}");
+            assert_eq!(s.visible, k < 9, "{s:?}");
+        }
+        if s.visible {
+            visible_length[k] += length;
+        }
+    }
+    // Every visible edge is drawn along its whole projected length.
+    for (k, e) in all.iter().enumerate().take(9) {
+        let want = (cam.project(e.1) - cam.project(e.0)).length();
+        assert!((visible_length[k] - want).abs() < 0.5, "edge {k}: {} of {want}", visible_length[k]);
+    }
+    // The SVG has one <line> per segment (hidden ones only when asked), at
+    // the segments' coordinates.
+    let svg = to_svg(&v, [0.0; 3], 1.0, true);
+    let lines: Vec<&str> = svg.split("<line ").skip(1).collect();
+    assert_eq!(lines.len(), v.segments.len());
+    let visible_only = to_svg(&v, [0.0; 3], 1.0, false);
+    let n_visible = v.segments.iter().filter(|s| s.visible).count();
+    assert_eq!(visible_only.matches("<line ").count(), n_visible);
+    assert!(n_visible < v.segments.len());
+    let attr = |l: &str, name: &str| -> f32 {
+        let start = l.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+        l[start..].split('"').next().unwrap().parse().unwrap()
+    };
+    for l in lines {
+        let (a, b) = (
+            glam::Vec2::new(attr(l, "x1"), attr(l, "y1")),
+            glam::Vec2::new(attr(l, "x2"), attr(l, "y2")),
+        );
+        assert!(
+            v.segments.iter().any(|s| (s.a - a).length() < 2e-3 && (s.b - b).length() < 2e-3),
+            "{l}"
+        );
+    }
+}
+
+#[test]
+fn svg_lines_of_a_mesh_lie_on_its_projected_edges_and_hide_behind_it() {
+    let (w, h) = (160u32, 120u32);
+    let (v, scene) = vectors(&cube_and_sphere_mesh(), w, h);
+    let eye = DVec3::new(3.0, 2.5, 4.0);
+    let cam = Pinhole::new(eye.to_array(), [0.0; 3], 40.0, w, h);
+    // Sphere mesh edges in world space, for the "lies on an edge" check.
+    let (pos, idx) = uv_sphere(24, 12);
+    let parse = |s: &str| -> Vec<Vec<f64>> {
+        s.split("],[")
+            .map(|t| {
+                t.trim_matches(|c| c == '[' || c == ']')
+                    .split(',')
+                    .map(|x| x.parse().unwrap())
+                    .collect()
+            })
+            .collect()
+    };
+    let to_world = |p: &Vec<f64>| DVec3::new(p[0], p[1], p[2]) * 0.6 + DVec3::new(1.6, 1.45, 1.9);
+    let verts: Vec<DVec3> = parse(&pos).iter().map(to_world).collect();
+    let mut edges: Vec<(DVec3, DVec3)> = cube_edges();
+    for t in parse(&idx) {
+        for k in 0..3 {
+            edges.push((verts[t[k] as usize], verts[t[(k + 1) % 3] as usize]));
+        }
+    }
+    let on_edge = |p: DVec3| {
+        edges.iter().any(|&(a, b)| {
+            let d = b - a;
+            let t = ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+            (a + d * t - p).length() < 1e-4
+        })
+    };
+    let on_sphere = |s: &prism::integrators::vector_lines::Segment2| {
+        s.world
+            .iter()
+            .all(|p| (p.as_dvec3() - DVec3::new(1.6, 1.45, 1.9)).length() < 0.6 + 1e-4)
+    };
+    let mut sphere_silhouettes = 0;
+    let mut hidden_checked = 0;
+    for s in &v.segments {
+        for (end, world) in [(s.a, s.world[0]), (s.b, s.world[1])] {
+            let want = cam.project(world.as_dvec3());
+            assert!((end.as_dvec2() - want).length() <= 0.5, "{s:?}: {want}");
+            assert!(on_edge(world.as_dvec3()), "{s:?} is off every mesh edge");
+        }
+        if (s.b - s.a).length() > 0.25 {
+            let mid = (s.world[0].as_dvec3() + s.world[1].as_dvec3()) * 0.5;
+            assert_eq!(s.visible, brute_visible(&scene, eye, mid), "{s:?}");
+            hidden_checked += !s.visible as u32;
+        }
+        sphere_silhouettes += (on_sphere(s) && s.kind == EdgeKind::Silhouette) as u32;
+    }
+    // The smooth sphere's facets meet at 15 degrees: no creases, a
+    // silhouette all round; the sphere hides part of the cube.
+    assert!(
+        !v.segments.iter().any(|s| on_sphere(s) && s.kind == EdgeKind::Crease),
+        "creases on the smooth sphere"
+    );
+    assert!(sphere_silhouettes >= 12, "{sphere_silhouettes}");
+    // The three back edges, and the three interior edges where the sphere
+    // covers the near corner.
+    assert!(hidden_checked >= 6, "{hidden_checked}");
 }
