@@ -80,7 +80,7 @@ pub struct RenderArgs {
     style: Option<StyleArg>,
     /// Gooch parameters b, y, alpha, beta: cool tone (0,0,b) + alpha kd,
     /// warm tone (y,y,0) + beta kd [default: the scene's, else 0.4,0.4,0.2,0.6].
-    #[arg(long, value_name = "B,Y,ALPHA,BETA", value_delimiter = ',', num_args = 4, allow_hyphen_values = true)]
+    #[arg(long, value_name = "B,Y,ALPHA,BETA", value_delimiter = ',', allow_hyphen_values = true)]
     gooch: Option<Vec<f32>>,
     /// Draw feature lines found by ray casting over the image: silhouettes,
     /// creases, borders of open meshes and material boundaries, also in
@@ -94,7 +94,7 @@ pub struct RenderArgs {
     line_width: Option<f32>,
     /// Line colour as R,G,B in [0, 1] (display values for PNG) [default: the
     /// scene's, else 0,0,0]. Implies --lines.
-    #[arg(long, value_name = "R,G,B", value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_name = "R,G,B", value_delimiter = ',', allow_hyphen_values = true)]
     line_color: Option<Vec<f32>>,
     /// Crease angle in degrees, 0 to 180: neighbouring normals of one object
     /// deviating by more than this make a crease line; 180 draws no creases
@@ -154,6 +154,22 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     }
 
     let s = &desc.settings;
+    if let Some(g) = &args.gooch
+        && g.len() != 4
+    {
+        return Err(Error::Invalid(format!(
+            "--gooch takes four numbers b,y,alpha,beta, got {}",
+            g.len()
+        )));
+    }
+    if let Some(c) = &args.line_color
+        && c.len() != 3
+    {
+        return Err(Error::Invalid(format!(
+            "--line-color takes three numbers r,g,b, got {}",
+            c.len()
+        )));
+    }
     let gooch = match &args.gooch {
         Some(g) => Some(GoochParams {
             b: g[0],
