@@ -554,8 +554,7 @@ pub fn render_wavefront(world: &mut World) {
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
     // Gooch shading traces no shadow rays.
-    let shadows =
-        features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch;
+    let shadows = features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch;
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     world.insert_resource(WavefrontFrame {

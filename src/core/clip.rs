@@ -48,8 +48,14 @@ mod tests {
         let (t0, t1) = clip_segment(Vec2::new(-10.0, 2.0), Vec2::new(20.0, 2.0), lo, hi).unwrap();
         assert!((t0 - 1.0 / 3.0).abs() < 1e-6 && (t1 - 2.0 / 3.0).abs() < 1e-6);
         // Outside, parallel to a side, and passing a corner.
-        assert_eq!(clip_segment(Vec2::new(-1.0, 6.0), Vec2::new(11.0, 6.0), lo, hi), None);
-        assert_eq!(clip_segment(Vec2::new(-2.0, 4.0), Vec2::new(4.0, 10.0), lo, hi), None);
+        assert_eq!(
+            clip_segment(Vec2::new(-1.0, 6.0), Vec2::new(11.0, 6.0), lo, hi),
+            None
+        );
+        assert_eq!(
+            clip_segment(Vec2::new(-2.0, 4.0), Vec2::new(4.0, 10.0), lo, hi),
+            None
+        );
         // Brute force against sampling along random-ish segments.
         for k in 0..200 {
             let f = |i: u32| ((k * 7919 + i * 104_729) % 1000) as f32 / 1000.0 * 30.0 - 10.0;
@@ -64,7 +70,10 @@ mod tests {
                 let want = inside(t);
                 let within = got.is_some_and(|(t0, t1)| t >= t0 - 1e-4 && t <= t1 + 1e-4);
                 let strictly = got.is_some_and(|(t0, t1)| t > t0 + 1e-4 && t < t1 - 1e-4);
-                assert!(!want || within, "segment {k} at {t}: inside but clipped away");
+                assert!(
+                    !want || within,
+                    "segment {k} at {t}: inside but clipped away"
+                );
                 assert!(want || !strictly, "segment {k} at {t}: outside but kept");
             }
         }

@@ -134,7 +134,11 @@ impl LineSettings {
                 self.crease_degrees
             ));
         }
-        if !self.color.iter().all(|c| c.is_finite() && (0.0..=1.0).contains(c)) {
+        if !self
+            .color
+            .iter()
+            .all(|c| c.is_finite() && (0.0..=1.0).contains(c))
+        {
             return Err(format!(
                 "line colour channels must be in [0, 1], got {:?}",
                 self.color
@@ -147,7 +151,12 @@ impl LineSettings {
 impl GoochParams {
     /// Rejects non-finite or negative parameters.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [("b", self.b), ("y", self.y), ("alpha", self.alpha), ("beta", self.beta)] {
+        for (name, v) in [
+            ("b", self.b),
+            ("y", self.y),
+            ("alpha", self.alpha),
+            ("beta", self.beta),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!(
                     "Gooch parameter {name} must be finite and non-negative, got {v}"

@@ -107,8 +107,8 @@ impl Feature {
             };
             let it = Interaction::new(scene, &ray, &hit);
             let s = &it.surface;
-            let specular_only = !it.is_lit_by_lights()
-                && (s.mirror.max_element() > 0.0 || s.transmission > 0.0);
+            let specular_only =
+                !it.is_lit_by_lights() && (s.mirror.max_element() > 0.0 || s.transmission > 0.0);
             if specular_only && depth < max_depth {
                 let [reflection, refraction] = scatter(&it);
                 let next = match (refraction, reflection) {
@@ -218,7 +218,11 @@ pub fn render_lines(
     let (w, h) = (settings.width, settings.height);
     let s = SUBSAMPLES as i32;
     let offsets = stencil(lines.width);
-    let halo = offsets.iter().map(|&(x, y)| x.abs().max(y.abs())).max().unwrap_or(1);
+    let halo = offsets
+        .iter()
+        .map(|&(x, y)| x.abs().max(y.abs()))
+        .max()
+        .unwrap_or(1);
     let cos_crease = crease_cosine(lines);
     let bands: Vec<u32> = (0..h.div_ceil(BAND_ROWS)).collect();
     let results: Vec<(Vec<f32>, u64)> = bands
@@ -237,10 +241,7 @@ pub fn render_lines(
                 for i in 0..gw {
                     let gx = gx0 + i as i32;
                     let gy = gy0 + j as i32;
-                    let p = Vec2::new(
-                        (gx as f32 + 0.5) / s as f32,
-                        (gy as f32 + 0.5) / s as f32,
-                    );
+                    let p = Vec2::new((gx as f32 + 0.5) / s as f32, (gy as f32 + 0.5) / s as f32);
                     grid.push(Feature::trace(
                         scene,
                         camera.ray(p),
@@ -260,7 +261,8 @@ pub fn render_lines(
                             let j = (py * s + sy + halo) as usize;
                             let a = &grid[j * gw + i];
                             let on_line = offsets.iter().any(|&(dx, dy)| {
-                                let b = &grid[(j as i32 + dy) as usize * gw + (i as i32 + dx) as usize];
+                                let b =
+                                    &grid[(j as i32 + dy) as usize * gw + (i as i32 + dx) as usize];
                                 a.edge(b, cos_crease)
                             });
                             ink += on_line as u32;

@@ -355,7 +355,12 @@ pub fn edge_count(scene: &RenderScene, camera: &CameraRays, crease_degrees: f32)
 /// (display values in `[0, 1]`), `stroke` the width in pixels.
 pub fn to_svg(lines: &VectorLines, color: [f32; 3], stroke: f32, hidden: bool) -> String {
     let hex = |c: f32| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
-    let ink = format!("#{:02x}{:02x}{:02x}", hex(color[0]), hex(color[1]), hex(color[2]));
+    let ink = format!(
+        "#{:02x}{:02x}{:02x}",
+        hex(color[0]),
+        hex(color[1]),
+        hex(color[2])
+    );
     let mut s = String::new();
     let (w, h) = (lines.width, lines.height);
     let _ = writeln!(

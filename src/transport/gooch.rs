@@ -75,7 +75,10 @@ mod tests {
             (1.0, Color::new(0.88, 0.52, 0.12)),
         ] {
             let c = gooch_tone(&g, kd, ndl);
-            assert!((c - want).abs().max_element() < 1e-6, "{ndl}: {c} vs {want}");
+            assert!(
+                (c - want).abs().max_element() < 1e-6,
+                "{ndl}: {c} vs {want}"
+            );
         }
     }
 }

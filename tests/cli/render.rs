@@ -297,9 +297,15 @@ fn illustration_options_reject_bad_input_cleanly() {
         (&["--crease-angle", "200"], &["crease angle", "180"]),
         (&["--crease-angle", "-5"], &["crease angle"]),
         (&["--line-color", "0,2,0"], &["colour"]),
-        (&["--lines-svg", "/no/such/folder/lines.svg"], &["lines.svg"]),
+        (
+            &["--lines-svg", "/no/such/folder/lines.svg"],
+            &["lines.svg"],
+        ),
         (&["--lines-svg", "lines.txt"], &[".svg"]),
-        (&["--style", "gooch", "--transport", "path"], &["gooch", "path"]),
+        (
+            &["--style", "gooch", "--transport", "path"],
+            &["gooch", "path"],
+        ),
         (&["--gooch", "0.4,nan,0.2,0.6"], &["gooch"]),
     ];
     for (extra, words) in cases {
@@ -329,7 +335,14 @@ fn lines_and_svg_are_written_whole() {
         &scene,
         &out,
         &[
-            "--width", "48", "--height", "36", "--style", "gooch", "--lines", "--lines-svg",
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--style",
+            "gooch",
+            "--lines",
+            "--lines-svg",
         ],
     );
     // --lines-svg takes a value: without one the command line is refused.
@@ -339,7 +352,16 @@ fn lines_and_svg_are_written_whole() {
         .arg(&scene)
         .arg("-o")
         .arg(&out)
-        .args(["--width", "48", "--height", "36", "--style", "gooch", "--line-width", "1.5"])
+        .args([
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--style",
+            "gooch",
+            "--line-width",
+            "1.5",
+        ])
         .arg("--lines-svg")
         .arg(&svg)
         .arg("--hidden-lines")

@@ -3,13 +3,13 @@
 
 use glam::DVec3;
 use prism::core::settings::{LineSettings, RenderSettings, Style};
+use prism::image::film::Film;
 use prism::image::lines::LineOverlay;
 use prism::image::output::{PngOptions, write_image_with_lines};
+use prism::integrators::IntegratorKind;
 use prism::integrators::vector_lines::{EdgeKind, VectorLines, to_svg, vector_lines};
 use prism::io::desc::SettingsDesc;
 use prism::scene::camera::CameraRays;
-use prism::image::film::Film;
-use prism::integrators::IntegratorKind;
 
 use crate::common::render::{config, render_desc, renderer};
 use crate::common::scenes::load_toml;
@@ -129,7 +129,10 @@ fn gooch_sphere_matches_the_closed_form_at_every_pixel_in_both_integrators() {
         assert!(checked > w * h - 16, "{checked} pixels checked");
     }
     // The sphere shows the whole range of tones.
-    assert!(n_dot_l_range.0 < -0.9 && n_dot_l_range.1 > 0.9, "{n_dot_l_range:?}");
+    assert!(
+        n_dot_l_range.0 < -0.9 && n_dot_l_range.1 > 0.9,
+        "{n_dot_l_range:?}"
+    );
 }
 
 // ---------------------------------------------------------------------------
@@ -220,7 +223,11 @@ intensity = 20
 #[test]
 fn sphere_silhouette_is_the_circle_of_angular_radius_asin_r_over_d() {
     let (w, h) = (96u32, 96u32);
-    let lines = overlay(SPHERE_AT_FIVE, &line_settings(w, h, 45.57), IntegratorKind::Recursive);
+    let lines = overlay(
+        SPHERE_AT_FIVE,
+        &line_settings(w, h, 45.57),
+        IntegratorKind::Recursive,
+    );
     let cam = Pinhole::new([0.0, 0.0, 5.0], [0.0; 3], 40.0, w, h);
     // The silhouette's angular radius asin(r/d), on the image plane.
     let rho = (1.0f64 / 5.0).asin().tan() / cam.half_h * h as f64 / 2.0;
@@ -232,7 +239,10 @@ fn sphere_silhouette_is_the_circle_of_angular_radius_asin_r_over_d() {
                 inked += 1;
                 let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
                 let off = ((p - centre).length() - rho).abs();
-                assert!(off <= 1.0, "line pixel ({x}, {y}) is {off} px off the circle");
+                assert!(
+                    off <= 1.0,
+                    "line pixel ({x}, {y}) is {off} px off the circle"
+                );
             }
         }
     }
@@ -241,11 +251,17 @@ fn sphere_silhouette_is_the_circle_of_angular_radius_asin_r_over_d() {
         let phi = k as f64 / 1440.0 * std::f64::consts::TAU;
         let p = centre + glam::DVec2::new(phi.cos(), phi.sin()) * rho;
         let (x, y) = (p.x.floor() as u32, p.y.floor() as u32);
-        assert!(lines.get(x, y) > 0.0, "gap at angle {phi}: pixel ({x}, {y})");
+        assert!(
+            lines.get(x, y) > 0.0,
+            "gap at angle {phi}: pixel ({x}, {y})"
+        );
     }
     // About one pixel wide: the ring's area is 2 pi rho pixels.
     let ring = std::f64::consts::TAU * rho;
-    assert!((inked as f64) < 2.5 * ring, "{inked} inked pixels for a ring of {ring}");
+    assert!(
+        (inked as f64) < 2.5 * ring,
+        "{inked} inked pixels for a ring of {ring}"
+    );
 }
 
 /// A flat-shaded cube of side 2 at the origin in three-quarter view.
@@ -283,10 +299,13 @@ fn cube_edges() -> Vec<(DVec3, DVec3)> {
     v
 }
 
+/// Edges as pairs of end points.
+type Edges = Vec<(DVec3, DVec3)>;
+
 /// The cube's edges seen from (3, 2.5, 4): the 3 interior edges meeting at
 /// the near corner (1, 1, 1), the 6 outline edges, and the 3 hidden ones
 /// meeting at (-1, -1, -1).
-fn classified_cube_edges() -> (Vec<(DVec3, DVec3)>, Vec<(DVec3, DVec3)>, Vec<(DVec3, DVec3)>) {
+fn classified_cube_edges() -> (Edges, Edges, Edges) {
     let near = DVec3::ONE;
     let far = -DVec3::ONE;
     let (mut interior, mut outline, mut hidden) = (Vec::new(), Vec::new(), Vec::new());
@@ -315,7 +334,11 @@ fn cube_shows_its_three_interior_edges_exactly_below_ninety_degrees() {
         })
     };
     for crease in [10.0, 45.57, 89.0, 90.0, 120.0, 180.0] {
-        let lines = overlay(CUBE, &line_settings(w, h, crease), IntegratorKind::Recursive);
+        let lines = overlay(
+            CUBE,
+            &line_settings(w, h, crease),
+            IntegratorKind::Recursive,
+        );
         let mut interior_ink = 0;
         for y in 0..h {
             for x in 0..w {
@@ -398,7 +421,11 @@ position = [2, 3, 4]
 intensity = 20
 "#
     );
-    let lines = overlay(&toml, &line_settings(w, h, 45.57), IntegratorKind::Recursive);
+    let lines = overlay(
+        &toml,
+        &line_settings(w, h, 45.57),
+        IntegratorKind::Recursive,
+    );
     let cam = Pinhole::new([0.0, 0.0, 5.0], [0.0; 3], 40.0, w, h);
     let rho = (1.0f64 / 5.0).asin().tan() / cam.half_h * h as f64 / 2.0;
     let centre = glam::DVec2::new(w as f64 / 2.0, h as f64 / 2.0);
@@ -410,7 +437,10 @@ intensity = 20
                 let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
                 // The polygonal outline is within 0.3% of the circle.
                 let off = (p - centre).length() - rho;
-                assert!(off.abs() <= 1.5, "ink at ({x}, {y}), {off} px from the outline");
+                assert!(
+                    off.abs() <= 1.5,
+                    "ink at ({x}, {y}), {off} px from the outline"
+                );
             }
         }
     }
@@ -423,39 +453,86 @@ fn lines_do_not_depend_on_lighting_spp_threads_or_integrator_and_run_only_when_a
     let base = line_settings(w, h, 45.57);
     let reference = overlay(CUBE, &base, IntegratorKind::Recursive);
     assert!(reference.inked_pixels() > 100);
-    let other_light = CUBE.replace("direction = [-1, -2, -1]", "direction = [2, -1, 0.5]")
+    let other_light = CUBE
+        .replace("direction = [-1, -2, -1]", "direction = [2, -1, 0.5]")
         .replace("illuminance = 3", "illuminance = 300");
-    assert_eq!(overlay(&other_light, &base, IntegratorKind::Recursive), reference, "lighting");
-    let spp = RenderSettings { spp: 4, seed: 9, ..base.clone() };
-    assert_eq!(overlay(CUBE, &spp, IntegratorKind::Recursive), reference, "spp");
-    assert_eq!(overlay(CUBE, &base, IntegratorKind::Wavefront), reference, "integrator");
-    let gooch = RenderSettings { style: Style::Gooch, ..base.clone() };
-    assert_eq!(overlay(CUBE, &gooch, IntegratorKind::Wavefront), reference, "style");
+    assert_eq!(
+        overlay(&other_light, &base, IntegratorKind::Recursive),
+        reference,
+        "lighting"
+    );
+    let spp = RenderSettings {
+        spp: 4,
+        seed: 9,
+        ..base.clone()
+    };
+    assert_eq!(
+        overlay(CUBE, &spp, IntegratorKind::Recursive),
+        reference,
+        "spp"
+    );
+    assert_eq!(
+        overlay(CUBE, &base, IntegratorKind::Wavefront),
+        reference,
+        "integrator"
+    );
+    let gooch = RenderSettings {
+        style: Style::Gooch,
+        ..base.clone()
+    };
+    assert_eq!(
+        overlay(CUBE, &gooch, IntegratorKind::Wavefront),
+        reference,
+        "style"
+    );
     for threads in [1, 3] {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         let l = pool.install(|| overlay(CUBE, &base, IntegratorKind::Recursive));
         assert_eq!(l, reference, "{threads} threads");
     }
     // No lines asked for: no line stage, no line rays.
     let frame = render_desc(
         load_toml(CUBE).unwrap(),
-        config(RenderSettings { lines: None, ..base.clone() }, IntegratorKind::Recursive),
+        config(
+            RenderSettings {
+                lines: None,
+                ..base.clone()
+            },
+            IntegratorKind::Recursive,
+        ),
     );
     assert!(frame.lines.is_none() && frame.line_rays == 0);
     // Exposure: fully inked pixels keep the ink colour in the PNG (lines
     // two pixels wide, to have some).
     let wide = RenderSettings {
-        lines: Some(LineSettings { width: 2.0, ..Default::default() }),
+        lines: Some(LineSettings {
+            width: 2.0,
+            ..Default::default()
+        }),
         ..base.clone()
     };
-    let frame = render_desc(load_toml(CUBE).unwrap(), config(wide, IntegratorKind::Recursive));
+    let frame = render_desc(
+        load_toml(CUBE).unwrap(),
+        config(wide, IntegratorKind::Recursive),
+    );
     let dir = tempfile::tempdir().unwrap();
     let mut codes = Vec::new();
     for ev in [0.0, 4.0] {
         let path = dir.path().join(format!("ev{ev}.png"));
-        let opts = PngOptions { exposure: ev, ..Default::default() };
-        write_image_with_lines(&path, frame.film.as_ref().unwrap(), frame.lines.as_ref(), &opts)
-            .unwrap();
+        let opts = PngOptions {
+            exposure: ev,
+            ..Default::default()
+        };
+        write_image_with_lines(
+            &path,
+            frame.film.as_ref().unwrap(),
+            frame.lines.as_ref(),
+            &opts,
+        )
+        .unwrap();
         codes.push(image::open(&path).unwrap().to_rgb8());
     }
     let l = frame.lines.as_ref().unwrap();
@@ -502,7 +579,10 @@ translate = [0, 0, 6]
                 inked += 1;
                 let p = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
                 let off = ((p - centre).length() - rho).abs();
-                assert!(off <= 1.0, "ink at ({x}, {y}) {off} px off the reflected outline");
+                assert!(
+                    off <= 1.0,
+                    "ink at ({x}, {y}) {off} px off the reflected outline"
+                );
             }
         }
     }
@@ -530,7 +610,10 @@ scale = 0.6
 fn vectors(toml: &str, w: u32, h: u32) -> (VectorLines, std::sync::Arc<prism::scene::RenderScene>) {
     let desc = load_toml(toml).unwrap();
     let camera = desc.cameras[0].clone();
-    let mut r = renderer(desc, config(line_settings(w, h, 45.57), IntegratorKind::Recursive));
+    let mut r = renderer(
+        desc,
+        config(line_settings(w, h, 45.57), IntegratorKind::Recursive),
+    );
     r.run();
     let scene = r.scene().unwrap();
     let rays = CameraRays::new(&camera, w, h);
@@ -553,7 +636,7 @@ fn svg_lines_of_a_cube_are_its_projected_edges_with_hidden_ones_classified() {
     let cam = Pinhole::new(eye.to_array(), [0.0; 3], 40.0, w, h);
     let (interior, outline, hidden) = classified_cube_edges();
     let d2 = |p: glam::Vec2| p.as_dvec2();
-    let mut visible_length = vec![0.0; 12];
+    let mut visible_length = [0.0; 12];
     let all: Vec<_> = interior.iter().chain(&outline).chain(&hidden).collect();
     for s in &v.segments {
         // Each end is the projection of its world point, within half a pixel.
@@ -596,7 +679,11 @@ fn svg_lines_of_a_cube_are_its_projected_edges_with_hidden_ones_classified() {
     // Every visible edge is drawn along its whole projected length.
     for (k, e) in all.iter().enumerate().take(9) {
         let want = (cam.project(e.1) - cam.project(e.0)).length();
-        assert!((visible_length[k] - want).abs() < 0.5, "edge {k}: {} of {want}", visible_length[k]);
+        assert!(
+            (visible_length[k] - want).abs() < 0.5,
+            "edge {k}: {} of {want}",
+            visible_length[k]
+        );
     }
     // The SVG has one <line> per segment (hidden ones only when asked), at
     // the segments' coordinates.
@@ -617,7 +704,9 @@ fn svg_lines_of_a_cube_are_its_projected_edges_with_hidden_ones_classified() {
             glam::Vec2::new(attr(l, "x2"), attr(l, "y2")),
         );
         assert!(
-            v.segments.iter().any(|s| (s.a - a).length() < 2e-3 && (s.b - b).length() < 2e-3),
+            v.segments
+                .iter()
+                .any(|s| (s.a - a).length() < 2e-3 && (s.b - b).length() < 2e-3),
             "{l}"
         );
     }
@@ -679,7 +768,9 @@ fn svg_lines_of_a_mesh_lie_on_its_projected_edges_and_hide_behind_it() {
     // The smooth sphere's facets meet at 15 degrees: no creases, a
     // silhouette all round; the sphere hides part of the cube.
     assert!(
-        !v.segments.iter().any(|s| on_sphere(s) && s.kind == EdgeKind::Crease),
+        !v.segments
+            .iter()
+            .any(|s| on_sphere(s) && s.kind == EdgeKind::Crease),
         "creases on the smooth sphere"
     );
     assert!(sphere_silhouettes >= 12, "{sphere_silhouettes}");

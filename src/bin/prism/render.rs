@@ -14,13 +14,13 @@ use prism::systems::wavefront::BatchSize;
 use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
 use crate::args::StyleArg;
-use crate::vector;
-use prism::core::settings::{GoochParams, LineSettings};
 use crate::args::{
     BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
     SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
 use crate::stats::{RenderStats, WavefrontStatsJson};
+use crate::vector;
+use prism::core::settings::{GoochParams, LineSettings};
 
 /// Options of `prism render`.
 #[derive(clap::Args, Debug)]
@@ -80,7 +80,12 @@ pub struct RenderArgs {
     style: Option<StyleArg>,
     /// Gooch parameters b, y, alpha, beta: cool tone (0,0,b) + alpha kd,
     /// warm tone (y,y,0) + beta kd [default: the scene's, else 0.4,0.4,0.2,0.6].
-    #[arg(long, value_name = "B,Y,ALPHA,BETA", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "B,Y,ALPHA,BETA",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     gooch: Option<Vec<f32>>,
     /// Draw feature lines found by ray casting over the image: silhouettes,
     /// creases, borders of open meshes and material boundaries, also in
@@ -94,7 +99,12 @@ pub struct RenderArgs {
     line_width: Option<f32>,
     /// Line colour as R,G,B in [0, 1] (display values for PNG) [default: the
     /// scene's, else 0,0,0]. Implies --lines.
-    #[arg(long, value_name = "R,G,B", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "R,G,B",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     line_color: Option<Vec<f32>>,
     /// Crease angle in degrees, 0 to 180: neighbouring normals of one object
     /// deviating by more than this make a crease line; 180 draws no creases
@@ -170,15 +180,12 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             c.len()
         )));
     }
-    let gooch = match &args.gooch {
-        Some(g) => Some(GoochParams {
-            b: g[0],
-            y: g[1],
-            alpha: g[2],
-            beta: g[3],
-        }),
-        None => None,
-    };
+    let gooch = args.gooch.as_ref().map(|g| GoochParams {
+        b: g[0],
+        y: g[1],
+        alpha: g[2],
+        beta: g[3],
+    });
     let lines_asked = args.lines
         || args.line_width.is_some()
         || args.line_color.is_some()

@@ -18,7 +18,11 @@ pub fn check_svg_path(path: &Path) -> Result<()> {
         path: path.to_path_buf(),
         message,
     };
-    if path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref()
+    if path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
         != Some("svg")
     {
         return Err(err("--lines-svg needs a file name ending in .svg".into()));
