@@ -330,6 +330,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         primitives,
         lights: light_count,
         nonfinite_samples: frame.counters.nonfinite_samples,
+        line_seconds: frame.lines.as_ref().map(|_| frame.line_seconds),
+        line_rays: frame.lines.as_ref().map(|_| frame.line_rays),
         wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,
