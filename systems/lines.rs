@@ -7,7 +7,6 @@ use bevy_ecs::prelude::*;
 
 use super::frame::{ExtractedScene, Frame, RenderConfig, SceneAccel};
 use crate::integrators::{self, lines};
-use crate::scene::camera::CameraRays;
 
 /// Run condition: the settings ask for feature lines.
 pub fn lines_requested(config: Res<RenderConfig>) -> bool {
@@ -32,7 +31,7 @@ pub fn render_feature_lines(world: &mut World) {
         return;
     };
     let start = Instant::now();
-    let rays = CameraRays::new(&camera, config.settings.width, config.settings.height);
+    let rays = integrators::camera_rays(&scene, &camera, &config.settings);
     let progress = config
         .progress
         .as_deref()

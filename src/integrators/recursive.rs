@@ -137,7 +137,7 @@ pub fn render(
     progress: Option<Progress<'_>>,
 ) -> (Film, RenderCounters) {
     let mut film = Film::new(settings.width, settings.height);
-    let cam = camera_rays(camera, settings);
+    let cam = camera_rays(scene, camera, settings);
     let width = settings.width as usize;
     let counters = film
         .pixels

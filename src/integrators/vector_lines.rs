@@ -59,7 +59,8 @@ impl EdgeKind {
     }
 }
 
-/// A line edge of a mesh in world space.
+/// A line edge of a mesh in the scene's frame (world coordinates minus
+/// [`RenderScene::origin`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WorldEdge {
     /// One end.
@@ -79,7 +80,8 @@ pub struct Segment2 {
     pub a: Vec2,
     /// End.
     pub b: Vec2,
-    /// The world points `a` and `b` are the projections of.
+    /// The points `a` and `b` are the projections of, in the scene's
+    /// frame (world coordinates minus [`RenderScene::origin`]).
     pub world: [Vec3A; 2],
     /// Why it is a line.
     pub kind: EdgeKind,
@@ -295,7 +297,8 @@ fn edge_segments(
     }
 }
 
-/// The vector lines of `scene`'s meshes seen through `camera` on a
+/// The vector lines of `scene`'s meshes seen through `camera` (prepared in
+/// the scene's frame, [`CameraRays::relative_to`] its origin) on a
 /// `width` x `height` image, creases above `crease_degrees`. `progress`
 /// is called with the number of edges finished.
 pub fn vector_lines(

@@ -21,7 +21,9 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3A};
 
 use crate::core::math::{Color, Ray, luminance, max_component, orthonormal_basis};
-use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
+use crate::core::optics::{
+    OFFSET_ULPS, fresnel_dielectric, offset_origin_relative, reflect, refract,
+};
 use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::RenderSettings;
@@ -278,16 +280,23 @@ pub fn next_event(
         if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
             continue;
         }
-        // End the segment just off the emitter, on the receiver's side, so
-        // the emitter itself never counts as a blocker.
+        // End the segment just short of the emitter, so that the emitter
+        // itself never counts as a blocker. The shadow ray's own hit on
+        // it is off by a few ulps of the largest of its origin, its length
+        // and the point, in the direction of the surface normal, which is
+        // that divided by the cosine along the ray: at grazing angles a
+        // fixed offset along the normal was not enough (seen: 11% of a
+        // sphere light's visible samples lost to self-shadowing, more when
+        // the light sat nearer the render origin than the receiver).
         let origin = offset_origin_relative(it.point, it.ng);
-        let side = if ls.normal.dot(wi) < 0.0 {
-            ls.normal
-        } else {
-            -ls.normal
-        };
-        let end = offset_origin_relative(ls.point, side);
-        let t_max = (end - origin).dot(wi);
+        let t_light = (ls.point - origin).dot(wi);
+        let scale = ls
+            .point
+            .abs()
+            .max_element()
+            .max(origin.abs().max_element())
+            .max(t_light);
+        let t_max = t_light - OFFSET_ULPS * f32::EPSILON * scale / cos_l;
         if !(t_max > 0.0) {
             continue;
         }

@@ -616,13 +616,21 @@ fn vectors(toml: &str, w: u32, h: u32) -> (VectorLines, std::sync::Arc<prism::sc
     );
     r.run();
     let scene = r.scene().unwrap();
-    let rays = CameraRays::new(&camera, w, h);
-    (vector_lines(&scene, &rays, (w, h), 45.57, None), scene)
+    let rays = CameraRays::relative_to(&camera, scene.origin(), w, h);
+    let mut v = vector_lines(&scene, &rays, (w, h), 45.57, None);
+    // Back to world coordinates (the scene's frame is centred on its
+    // render origin, the camera by default); exact for these small values.
+    let o = scene.origin().as_vec3a();
+    for s in &mut v.segments {
+        s.world = s.world.map(|p| p + o);
+    }
+    (v, scene)
 }
 
 /// Visibility of world point `p` from `eye` by testing every object and
 /// triangle (no BVH), with a margin of 1e-3 of the distance.
 fn brute_visible(scene: &prism::scene::RenderScene, eye: DVec3, p: DVec3) -> bool {
+    let (eye, p) = (eye - scene.origin(), p - scene.origin());
     let o = eye.as_vec3a();
     let ray = prism::core::math::Ray::new(o, p.as_vec3a() - o);
     scene.intersect_brute_force(&ray, 0.0, 1.0 - 1e-3).is_none()

@@ -23,6 +23,7 @@ mod common;
 
 mod analytic;
 mod illustration;
+mod large_worlds;
 mod path;
 mod robustness;
 mod scene_updates;

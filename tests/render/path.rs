@@ -128,8 +128,8 @@ fn assert_floor_matches(
 
 fn floor_scene(light: &str) -> (String, Camera) {
     let camera = Camera {
-        look_from: Vec3::new(0.0, 1.0, 0.0),
-        look_at: Vec3::ZERO,
+        look_from: glam::DVec3::new(0.0, 1.0, 0.0),
+        look_at: glam::DVec3::ZERO,
         up: Vec3::Z,
         vfov_degrees: 60.0,
         name: None,

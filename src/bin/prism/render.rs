@@ -22,6 +22,15 @@ use crate::stats::{RenderStats, WavefrontStatsJson};
 use crate::vector;
 use prism::core::settings::{GoochParams, LineSettings};
 
+/// `--render-origin`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum RenderOriginArg {
+    /// At the camera.
+    Camera,
+    /// At the world origin.
+    World,
+}
+
 /// Options of `prism render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -120,6 +129,12 @@ pub struct RenderArgs {
     /// segments are left out).
     #[arg(long, requires = "lines_svg")]
     hidden_lines: bool,
+    /// Where the single-precision frame the kernels work in is centred:
+    /// at the camera (precision follows the distance to the camera,
+    /// whatever the distance to the world origin), or at the world origin
+    /// (precision falls with the distance to it; for comparison).
+    #[arg(long, value_enum, default_value_t = RenderOriginArg::Camera)]
+    render_origin: RenderOriginArg,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -269,6 +284,9 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     )?;
     let batch_paths = args.batch_paths.get()?;
     renderer.insert_resource(BatchSize(batch_paths));
+    if args.render_origin == RenderOriginArg::World {
+        renderer.insert_resource(systems::RenderOrigin::Fixed(glam::DVec3::ZERO));
+    }
     renderer.run();
     if let Some(b) = &bar {
         b.finish_and_clear();

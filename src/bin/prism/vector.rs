@@ -54,7 +54,7 @@ pub fn write_svg(
     quiet: bool,
 ) -> Result<()> {
     let lines = settings.lines.unwrap_or_default();
-    let rays = CameraRays::new(camera, settings.width, settings.height);
+    let rays = CameraRays::relative_to(camera, scene.origin(), settings.width, settings.height);
     let total = edge_count(scene, &rays, lines.crease_degrees) as u64;
     let bar = progress_bar(
         total,
