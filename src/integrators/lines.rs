@@ -77,6 +77,8 @@ pub struct Feature {
     pub direction: Vec3A,
     /// Distance along the last segment.
     pub t: f32,
+    /// Length of the whole path from the eye (the scale of the depth test).
+    pub distance: f32,
 }
 
 impl Feature {
@@ -88,6 +90,7 @@ impl Feature {
         let mut ray = ray;
         let mut path = 0u64;
         let mut depth = 0;
+        let mut travelled = 0.0f32;
         loop {
             *rays += 1;
             let direction = ray.direction.normalize();
@@ -103,6 +106,7 @@ impl Feature {
                     origin: ray.origin,
                     direction,
                     t: f32::INFINITY,
+                    distance: f32::INFINITY,
                 };
             };
             let it = Interaction::new(scene, &ray, &hit);
@@ -121,6 +125,7 @@ impl Feature {
                         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
                         .rotate_left(17)
                         | 1;
+                    travelled += (hit.point - ray.origin).length();
                     ray = next.ray;
                     depth += 1;
                     continue;
@@ -137,6 +142,7 @@ impl Feature {
                 origin: ray.origin,
                 direction,
                 t: (hit.point - ray.origin).length(),
+                distance: travelled + (hit.point - ray.origin).length(),
             };
         }
     }
@@ -160,14 +166,15 @@ impl Feature {
     }
 
     /// Whether `self`'s tangent plane misses `other`'s distance along
-    /// `other`'s ray by more than [`DEPTH_TOLERANCE`] of it.
+    /// `other`'s last ray by more than [`DEPTH_TOLERANCE`] of `other`'s
+    /// whole path length.
     fn off_plane(&self, other: &Feature) -> bool {
         let denom = self.ng.dot(other.direction);
         if denom.abs() < 1e-6 {
             return true;
         }
         let t_plane = self.ng.dot(self.point - other.origin) / denom;
-        !((t_plane - other.t).abs() <= DEPTH_TOLERANCE * other.t)
+        !((t_plane - other.t).abs() <= DEPTH_TOLERANCE * other.distance)
     }
 }
 

@@ -7,10 +7,12 @@ use prism::image::film::Film;
 use prism::image::lines::LineOverlay;
 use prism::image::output::{PngOptions, write_image_with_lines};
 use prism::integrators::IntegratorKind;
+use prism::integrators::wavefront::Stage;
 use prism::integrators::vector_lines::{EdgeKind, VectorLines, to_svg, vector_lines};
 use prism::io::desc::SettingsDesc;
 use prism::scene::camera::CameraRays;
 
+use crate::common::images::assert_same_image;
 use crate::common::render::{config, render_desc, renderer};
 use crate::common::scenes::load_toml;
 
@@ -785,4 +787,62 @@ fn svg_lines_of_a_mesh_lie_on_its_projected_edges_and_hide_behind_it() {
     // The three back edges, and the three interior edges where the sphere
     // covers the near corner.
     assert!(hidden_checked >= 6, "{hidden_checked}");
+}
+
+#[test]
+fn gooch_through_mirrors_and_glass_is_the_same_in_both_integrators_without_shadow_rays() {
+    let path = crate::common::assets().join("illustration.toml");
+    let desc = || crate::common::scenes::load(&path);
+    let settings = SettingsDesc {
+        width: Some(60),
+        height: Some(40),
+        ..Default::default()
+    }
+    .resolve(&desc().settings);
+    assert_eq!(settings.style, Style::Gooch);
+    let rec = render_desc(desc(), config(settings.clone(), IntegratorKind::Recursive));
+    let wav = render_desc(desc(), config(settings.clone(), IntegratorKind::Wavefront));
+    let (a, b) = (rec.film.unwrap(), wav.film.unwrap());
+    assert_same_image(&a, &b, "Gooch, recursive against wavefront");
+    assert!(a.is_finite());
+    assert_eq!(rec.counters.rays, wav.counters.rays);
+    assert!(rec.counters.rays.reflection > 0 && rec.counters.rays.refraction > 0);
+    assert_eq!(rec.counters.rays.shadow, 0);
+    let runs = wav.wavefront.unwrap().runs;
+    assert_eq!(runs.get(Stage::TraceShadowRays), 0, "the shadow stage is gated off");
+    assert_eq!(rec.lines, wav.lines, "the scene asks for lines");
+    assert!(rec.lines.unwrap().inked_pixels() > 100);
+}
+
+#[test]
+fn lines_are_seen_through_glass() {
+    // A sheet of glass of index 1 (rays pass straight through) covers the
+    // whole view in front of the sphere: the lines seen through it are the
+    // sphere's outline, as without the glass.
+    let glass = r#"
+[[objects]]
+shape = { type = "polygon", vertices = [[-9, -9, 0], [9, -9, 0], [9, 9, 0], [-9, 9, 0]] }
+material = { diffuse = 0, transmission = 1, ior = 1.0 }
+translate = [0, 0, 2.5]
+"#;
+    let (w, h) = (96u32, 96u32);
+    let s = line_settings(w, h, 45.57);
+    let through = overlay(&format!("{SPHERE_AT_FIVE}{glass}"), &s, IntegratorKind::Recursive);
+    let direct = overlay(SPHERE_AT_FIVE, &s, IntegratorKind::Recursive);
+    let differ = through
+        .coverage
+        .iter()
+        .zip(&direct.coverage)
+        .filter(|(a, b)| (*a - *b).abs() > 1.0 / 16.0 + 1e-6)
+        .count();
+    assert!(through.inked_pixels() > 100);
+    assert!(differ <= 4, "{differ} pixels differ by more than one sub-sample");
+    // A glass sheet that bends the rays (index 1.5) still shows an outline
+    // (shifted and scaled), not an empty view.
+    let bent = overlay(
+        &format!("{SPHERE_AT_FIVE}{}", glass.replace("ior = 1.0", "ior = 1.5")),
+        &s,
+        IntegratorKind::Recursive,
+    );
+    assert!(bent.inked_pixels() > 100);
 }
