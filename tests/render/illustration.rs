@@ -846,3 +846,31 @@ translate = [0, 0, 2.5]
     );
     assert!(bent.inked_pixels() > 100);
 }
+
+#[test]
+fn scene_files_set_the_style_its_parameters_and_the_lines() {
+    let text = |settings: &str| {
+        format!("[settings]\n{settings}\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n")
+    };
+    let s = load_toml(&text(
+        "style = \"gooch\"\ngooch = { b = 0.5, beta = 0.7 }\nlines = { width = 2.5, color = [1, 0, 0] }",
+    ))
+    .unwrap()
+    .settings;
+    assert_eq!(s.style, Some(Style::Gooch));
+    let g = s.gooch.unwrap();
+    assert_eq!((g.b, g.y, g.alpha, g.beta), (0.5, 0.4, 0.2, 0.7));
+    let l = s.lines.unwrap();
+    assert_eq!((l.width, l.color, l.crease_degrees), (2.5, [1.0, 0.0, 0.0], 45.57));
+    // No table, no lines; a misspelt key or a bad value is an error naming it.
+    assert!(load_toml(&text("")).unwrap().settings.lines.is_none());
+    for (bad, word) in [
+        ("lines = { widht = 2 }", "widht"),
+        ("lines = { width = -2 }", "line width"),
+        ("gooch = { alpha = -1 }", "alpha"),
+        ("style = \"sketch\"", "sketch"),
+    ] {
+        let e = load_toml(&text(bad)).unwrap_err().to_string();
+        assert!(e.contains(word), "{bad}: {e}");
+    }
+}
