@@ -92,13 +92,14 @@ impl Default for GoochParams {
 /// faces' normals deviate by more than this are creases.
 pub const DEFAULT_CREASE_DEGREES: f32 = 45.57;
 
-/// Largest line width accepted, in pixels.
-pub const MAX_LINE_WIDTH: f32 = 64.0;
+/// Largest line width accepted, in pixels: the stencil grows with the
+/// square of the width.
+pub const MAX_LINE_WIDTH: f32 = 16.0;
 
 /// Feature lines found by ray casting: what is drawn and how.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LineSettings {
-    /// Line width in pixels, in `(0, 64]` (default 1).
+    /// Line width in pixels, in `(0, 16]` (default 1).
     pub width: f32,
     /// Line colour, in display (sRGB-encoded) values in `[0, 1]` for PNG
     /// output, linear for EXR (default black).

@@ -205,6 +205,35 @@ pub fn stencil(width: f32) -> Vec<(i32, i32)> {
     v
 }
 
+/// Summed-area table (`(gw + 1) x (gh + 1)`, exclusive prefix sums) of
+/// the grid positions that [`Feature::edge`] separates from their right or
+/// lower neighbour (both of the pair are counted).
+fn edge_table(grid: &[Feature], gw: usize, gh: usize, cos_crease: f32) -> Vec<u32> {
+    let mut flag = vec![0u32; gw * gh];
+    for j in 0..gh {
+        for i in 0..gw {
+            let a = &grid[j * gw + i];
+            if i + 1 < gw && a.edge(&grid[j * gw + i + 1], cos_crease) {
+                flag[j * gw + i] = 1;
+                flag[j * gw + i + 1] = 1;
+            }
+            if j + 1 < gh && a.edge(&grid[(j + 1) * gw + i], cos_crease) {
+                flag[j * gw + i] = 1;
+                flag[(j + 1) * gw + i] = 1;
+            }
+        }
+    }
+    let mut sat = vec![0u32; (gw + 1) * (gh + 1)];
+    for j in 0..gh {
+        let mut row = 0;
+        for i in 0..gw {
+            row += flag[j * gw + i];
+            sat[(j + 1) * (gw + 1) + i + 1] = sat[j * (gw + 1) + i + 1] + row;
+        }
+    }
+    sat
+}
+
 /// What the line pass did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LineReport {
@@ -257,6 +286,20 @@ pub fn render_lines(
                     ));
                 }
             }
+            // Prefilter: positions that differ from a horizontal or vertical
+            // neighbour, summed over rectangles. A position whose square of
+            // stencil radius holds none of them is not tested further (a
+            // difference between two positions of the square implies one
+            // between neighbours on the grid path joining them, for
+            // everything but slow drifts of normal or depth, which are
+            // not lines).
+            let sat = edge_table(&grid, gw, gh, cos_crease);
+            let near_edge = |i: usize, j: usize| {
+                let r = halo as usize;
+                let (x0, y0, x1, y1) = (i - r, j - r, i + r + 1, j + r + 1);
+                sat[y1 * (gw + 1) + x1] + sat[y0 * (gw + 1) + x0]
+                    > sat[y0 * (gw + 1) + x1] + sat[y1 * (gw + 1) + x0]
+            };
             let mut cov = vec![0.0f32; (w * rows) as usize];
             let per_pixel = 1.0 / (s * s) as f32;
             for py in 0..rows as i32 {
@@ -267,11 +310,12 @@ pub fn render_lines(
                             let i = (px * s + sx + halo) as usize;
                             let j = (py * s + sy + halo) as usize;
                             let a = &grid[j * gw + i];
-                            let on_line = offsets.iter().any(|&(dx, dy)| {
-                                let b =
-                                    &grid[(j as i32 + dy) as usize * gw + (i as i32 + dx) as usize];
-                                a.edge(b, cos_crease)
-                            });
+                            let on_line = near_edge(i, j)
+                                && offsets.iter().any(|&(dx, dy)| {
+                                    let b = &grid
+                                        [(j as i32 + dy) as usize * gw + (i as i32 + dx) as usize];
+                                    a.edge(b, cos_crease)
+                                });
                             ink += on_line as u32;
                         }
                     }

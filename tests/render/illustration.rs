@@ -7,8 +7,8 @@ use prism::image::film::Film;
 use prism::image::lines::LineOverlay;
 use prism::image::output::{PngOptions, write_image_with_lines};
 use prism::integrators::IntegratorKind;
-use prism::integrators::wavefront::Stage;
 use prism::integrators::vector_lines::{EdgeKind, VectorLines, to_svg, vector_lines};
+use prism::integrators::wavefront::Stage;
 use prism::io::desc::SettingsDesc;
 use prism::scene::camera::CameraRays;
 
@@ -809,7 +809,11 @@ fn gooch_through_mirrors_and_glass_is_the_same_in_both_integrators_without_shado
     assert!(rec.counters.rays.reflection > 0 && rec.counters.rays.refraction > 0);
     assert_eq!(rec.counters.rays.shadow, 0);
     let runs = wav.wavefront.unwrap().runs;
-    assert_eq!(runs.get(Stage::TraceShadowRays), 0, "the shadow stage is gated off");
+    assert_eq!(
+        runs.get(Stage::TraceShadowRays),
+        0,
+        "the shadow stage is gated off"
+    );
     assert_eq!(rec.lines, wav.lines, "the scene asks for lines");
     assert!(rec.lines.unwrap().inked_pixels() > 100);
 }
@@ -827,7 +831,11 @@ translate = [0, 0, 2.5]
 "#;
     let (w, h) = (96u32, 96u32);
     let s = line_settings(w, h, 45.57);
-    let through = overlay(&format!("{SPHERE_AT_FIVE}{glass}"), &s, IntegratorKind::Recursive);
+    let through = overlay(
+        &format!("{SPHERE_AT_FIVE}{glass}"),
+        &s,
+        IntegratorKind::Recursive,
+    );
     let direct = overlay(SPHERE_AT_FIVE, &s, IntegratorKind::Recursive);
     let differ = through
         .coverage
@@ -836,11 +844,17 @@ translate = [0, 0, 2.5]
         .filter(|(a, b)| (*a - *b).abs() > 1.0 / 16.0 + 1e-6)
         .count();
     assert!(through.inked_pixels() > 100);
-    assert!(differ <= 4, "{differ} pixels differ by more than one sub-sample");
+    assert!(
+        differ <= 4,
+        "{differ} pixels differ by more than one sub-sample"
+    );
     // A glass sheet that bends the rays (index 1.5) still shows an outline
     // (shifted and scaled), not an empty view.
     let bent = overlay(
-        &format!("{SPHERE_AT_FIVE}{}", glass.replace("ior = 1.0", "ior = 1.5")),
+        &format!(
+            "{SPHERE_AT_FIVE}{}",
+            glass.replace("ior = 1.0", "ior = 1.5")
+        ),
         &s,
         IntegratorKind::Recursive,
     );
@@ -861,7 +875,10 @@ fn scene_files_set_the_style_its_parameters_and_the_lines() {
     let g = s.gooch.unwrap();
     assert_eq!((g.b, g.y, g.alpha, g.beta), (0.5, 0.4, 0.2, 0.7));
     let l = s.lines.unwrap();
-    assert_eq!((l.width, l.color, l.crease_degrees), (2.5, [1.0, 0.0, 0.0], 45.57));
+    assert_eq!(
+        (l.width, l.color, l.crease_degrees),
+        (2.5, [1.0, 0.0, 0.0], 45.57)
+    );
     // No table, no lines; a misspelt key or a bad value is an error naming it.
     assert!(load_toml(&text("")).unwrap().settings.lines.is_none());
     for (bad, word) in [

@@ -102,7 +102,7 @@ pub struct RenderArgs {
     /// have a `lines` table, or with any other line option).
     #[arg(long)]
     lines: bool,
-    /// Line width in pixels, more than 0 and at most 64 [default: the
+    /// Line width in pixels, more than 0 and at most 16 [default: the
     /// scene's, else 1]. Implies --lines.
     #[arg(long, value_name = "PX", allow_hyphen_values = true)]
     line_width: Option<f32>,
