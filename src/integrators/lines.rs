@@ -180,12 +180,20 @@ impl Feature {
 
 /// Cosine below which two normals make a crease under `lines`.
 pub fn crease_cosine(lines: &LineSettings) -> f32 {
-    let deg = (lines.crease_degrees + CREASE_MARGIN_DEGREES).min(180.0);
-    if lines.crease_degrees >= 180.0 {
-        // Creases off: no pair of unit normals is below -1 - epsilon.
+    crease_cosine_degrees(lines.crease_degrees)
+}
+
+/// Cosine below which two unit normals deviate by more than `degrees`
+/// (plus a margin of 0.001 degrees); below -1 when `degrees` is 180, so
+/// that nothing is a crease.
+pub fn crease_cosine_degrees(degrees: f32) -> f32 {
+    if degrees >= 180.0 {
         return -2.0;
     }
-    deg.to_radians().cos()
+    (degrees + CREASE_MARGIN_DEGREES)
+        .min(180.0)
+        .to_radians()
+        .cos()
 }
 
 /// Stencil offsets, in sub-pixel steps, within half the line width: at

@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use crate::core::clip::clip_segment;
 use crate::core::math::Ray;
 use crate::integrators::Progress;
+use crate::integrators::lines::crease_cosine_degrees;
 use crate::scene::RenderScene;
 use crate::scene::camera::{CameraProjection, CameraRays};
 use crate::scene::instance::InstanceGeometry;
@@ -309,11 +310,7 @@ pub fn vector_lines(
     progress: Option<Progress<'_>>,
 ) -> VectorLines {
     let proj = camera.projection();
-    let cos_crease = if crease_degrees >= 180.0 {
-        -2.0
-    } else {
-        (crease_degrees + 1e-3).min(180.0).to_radians().cos()
-    };
+    let cos_crease = crease_cosine_degrees(crease_degrees);
     let edges = scene_edges(scene, proj.origin(), cos_crease);
     let size = Vec2::new(width as f32, height as f32);
     let parts: Vec<(Vec<Segment2>, u64)> = edges
@@ -344,11 +341,7 @@ pub fn vector_lines(
 
 /// Number of line edges `vector_lines` will process (for a progress bar).
 pub fn edge_count(scene: &RenderScene, camera: &CameraRays, crease_degrees: f32) -> usize {
-    let cos = if crease_degrees >= 180.0 {
-        -2.0
-    } else {
-        (crease_degrees + 1e-3).min(180.0).to_radians().cos()
-    };
+    let cos = crease_cosine_degrees(crease_degrees);
     scene_edges(scene, camera.origin(), cos).len()
 }
 
