@@ -37,6 +37,9 @@ pub struct RenderSettings {
     /// Feature lines (silhouettes, creases, borders, material boundaries)
     /// drawn over the image; `None` draws none and runs no line stage.
     pub lines: Option<LineSettings>,
+    /// Where the random numbers come from: Owen-scrambled Sobol points
+    /// (stratified per pixel) or independent hashed numbers.
+    pub sampler: crate::core::rng::SamplerKind,
 }
 
 /// How surfaces with a diffuse or glossy lobe are shaded.
@@ -215,6 +218,7 @@ impl Default for RenderSettings {
             style: Style::Shaded,
             gooch: GoochParams::default(),
             lines: None,
+            sampler: crate::core::rng::SamplerKind::default(),
         }
     }
 }

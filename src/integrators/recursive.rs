@@ -120,7 +120,7 @@ pub fn pixel_sample(
     counters: &mut RenderCounters,
 ) -> Color {
     let pixel = y * settings.width + x;
-    let mut sampler = Sampler::new(settings.seed, pixel, s);
+    let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
     let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
     counters.rays.camera += 1;
     match settings.transport {

@@ -76,6 +76,8 @@ pub struct SettingsDesc {
     pub gooch: Option<crate::core::settings::GoochParams>,
     /// Feature lines to draw.
     pub lines: Option<crate::core::settings::LineSettings>,
+    /// Random numbers.
+    pub sampler: Option<crate::core::rng::SamplerKind>,
 }
 
 impl SettingsDesc {
@@ -105,6 +107,7 @@ impl SettingsDesc {
             style: self.style.or(under.style).unwrap_or(d.style),
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
             lines: self.lines.or(under.lines),
+            sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
         }
     }
 }

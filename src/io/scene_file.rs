@@ -61,6 +61,15 @@ struct FileSettings {
     gooch: Option<FileGooch>,
     /// Feature lines; the table's presence turns them on.
     lines: Option<FileLines>,
+    /// `"sobol"` or `"hash"`.
+    sampler: Option<FileSampler>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileSampler {
+    Sobol,
+    Hash,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -509,6 +518,10 @@ impl Ctx<'_> {
             }),
             gooch,
             lines,
+            sampler: s.sampler.map(|k| match k {
+                FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
+                FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
+            }),
         })
     }
 

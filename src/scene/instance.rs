@@ -98,7 +98,8 @@ impl Instance {
 pub struct Hit {
     /// Ray parameter.
     pub t: f32,
-    /// World-space position.
+    /// Position in the scene's render frame: the world point minus
+    /// [`RenderScene::origin`](crate::scene::RenderScene::origin).
     pub point: Vec3A,
     /// Unit geometric normal in world space, as the geometry defines it
     /// (outward for closed shapes; not flipped towards the ray).

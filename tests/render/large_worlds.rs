@@ -13,7 +13,6 @@
 
 use std::path::{Path, PathBuf};
 
-use bevy_ecs::prelude::*;
 use glam::DVec3;
 use prism::core::math::Color;
 use prism::core::settings::{RenderSettings, Transport};
@@ -323,15 +322,12 @@ fn box_gltf(dir: &Path, name: &str, stored: f32, node: f64, at: f64) -> PathBuf 
     bytes.extend(faces.iter().flat_map(|i| i.to_le_bytes()));
     std::fs::write(dir.join(format!("{name}.bin")), &bytes).unwrap();
     let (lo, hi) = (stored - 2.0, stored + 2.0);
-    // Camera at (at+3, at+2, at+6) looking at the box's centre: a rotation
-    // about Y then X, written as a quaternion from glam.
-    let look = glam::Mat4::look_at_rh(
-        glam::Vec3::new(3.0, 2.0, 6.0),
-        glam::Vec3::ZERO,
-        glam::Vec3::Y,
-    )
-    .inverse();
-    let (_, q, _) = look.to_scale_rotation_translation();
+    // Camera at (at+3, at+2, at+6) looking at the box's centre: its -Z
+    // turned onto the viewing direction.
+    let q = glam::Quat::from_rotation_arc(
+        glam::Vec3::NEG_Z,
+        -glam::Vec3::new(3.0, 2.0, 6.0).normalize(),
+    );
     let text = format!(
         r#"{{
   "asset": {{"version": "2.0"}},

@@ -227,6 +227,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         seed: args.seed.seed,
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
+        sampler: args.path.sampler(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {

@@ -150,13 +150,17 @@ struct Ctx {
     node_transforms: Vec<Option<glam::DAffine3>>,
 }
 
+/// A primitive's shared mesh and the object-space offset its vertices
+/// were moved by.
+type PlacedMesh = (Arc<Mesh>, glam::DVec3);
+
 /// Caches and warnings accumulated while building the scene.
 #[derive(Default)]
 struct State {
     quality: BuildQuality,
     /// Each primitive's mesh and the offset its vertices were moved by
     /// (see `meshes::recentre`).
-    meshes: HashMap<(usize, usize), Option<(Arc<Mesh>, glam::DVec3)>>,
+    meshes: HashMap<(usize, usize), Option<PlacedMesh>>,
     materials: HashMap<Option<usize>, Material>,
     decoded: HashMap<usize, image::DynamicImage>,
     textures: HashMap<(usize, bool), Arc<ImageTexture>>,
