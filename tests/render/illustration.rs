@@ -891,3 +891,49 @@ fn scene_files_set_the_style_its_parameters_and_the_lines() {
         assert!(e.contains(word), "{bad}: {e}");
     }
 }
+
+#[test]
+fn borders_of_an_open_mesh_are_lines_in_pixels_and_in_the_svg() {
+    // The cube without its top face (y = 1), seen from above: the rim
+    // separates the outside walls from the inside ones and the inside from
+    // the background.
+    let open = CUBE.replace("[3,7,6],[3,6,2],", "");
+    assert_ne!(open, CUBE);
+    let (w, h) = (120u32, 90u32);
+    let cam = Pinhole::new([3.0, 2.5, 4.0], [0.0; 3], 40.0, w, h);
+    let rim: Vec<(DVec3, DVec3)> = cube_edges()
+        .into_iter()
+        .filter(|e| e.0.y == 1.0 && e.1.y == 1.0)
+        .collect();
+    assert_eq!(rim.len(), 4);
+    // Creases off: only borders and silhouettes remain.
+    let lines = overlay(&open, &line_settings(w, h, 180.0), IntegratorKind::Recursive);
+    for e in &rim {
+        let (a, b) = (cam.project(e.0), cam.project(e.1));
+        for k in 1..30 {
+            let p = a + (b - a) * (k as f64 / 30.0);
+            let (x, y) = (p.x.floor() as u32, p.y.floor() as u32);
+            assert!(lines.get(x, y) > 0.0, "rim gap at ({x}, {y}) on {e:?}");
+        }
+    }
+    let (v, _) = vectors(&open, w, h);
+    let on = |p: glam::Vec3A, e: &(DVec3, DVec3)| {
+        let p = p.as_dvec3();
+        let d = e.1 - e.0;
+        let t = ((p - e.0).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+        (e.0 + d * t - p).length() < 1e-4
+    };
+    for e in &rim {
+        let drawn: f32 = v
+            .segments
+            .iter()
+            .filter(|s| s.visible && s.world.iter().all(|&p| on(p, e)))
+            .map(|s| {
+                assert_eq!(s.kind, EdgeKind::Border, "{s:?}");
+                (s.b - s.a).length()
+            })
+            .sum();
+        let want = (cam.project(e.1) - cam.project(e.0)).length() as f32;
+        assert!((drawn - want).abs() < 0.5, "{e:?}: {drawn} of {want}");
+    }
+}
