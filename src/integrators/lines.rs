@@ -84,6 +84,21 @@ pub struct Feature {
 impl Feature {
     const MISS: u32 = u32::MAX;
 
+    /// A placeholder for positions that are not traced.
+    const NOTHING: Feature = Feature {
+        path: 0,
+        instance: Self::MISS,
+        material: Self::MISS,
+        front: true,
+        point: Vec3A::ZERO,
+        ns: Vec3A::ZERO,
+        ng: Vec3A::ZERO,
+        origin: Vec3A::ZERO,
+        direction: Vec3A::ZERO,
+        t: f32::INFINITY,
+        distance: f32::INFINITY,
+    };
+
     /// What the ray `ray` sees, followed through mirrors and glass for at
     /// most `max_depth` bounces. Counts the rays cast in `rays`.
     pub fn trace(scene: &RenderScene, ray: Ray, max_depth: u32, rays: &mut u64) -> Self {
@@ -280,9 +295,78 @@ pub fn render_lines(
             let gw = (w as i32 * s + 2 * halo) as usize;
             let gh = (rows as i32 * s + 2 * halo) as usize;
             let mut rays = 0u64;
+            // Coarse pass: one ray through each pixel centre of the band
+            // and a margin; pixels within `reach` of two differing
+            // neighbouring centres are candidates, the only ones whose
+            // sub-pixel positions are traced.
+            let reach = (0.5 * lines.width).ceil() as i32 + 1;
+            let margin = reach + 1;
+            let cw = (w as i32 + 2 * margin) as usize;
+            let ch = (rows as i32 + 2 * margin) as usize;
+            let mut coarse = Vec::with_capacity(cw * ch);
+            for j in 0..ch {
+                for i in 0..cw {
+                    let p = Vec2::new(
+                        i as f32 - margin as f32 + 0.5,
+                        (y0 as i32 + j as i32 - margin) as f32 + 0.5,
+                    );
+                    coarse.push(Feature::trace(
+                        scene,
+                        camera.ray(p),
+                        settings.max_depth,
+                        &mut rays,
+                    ));
+                }
+            }
+            let mut flagged = vec![false; cw * ch];
+            for j in 0..ch {
+                for i in 0..cw {
+                    let a = &coarse[j * cw + i];
+                    for (di, dj) in [(1i32, 0i32), (0, 1), (1, 1), (-1, 1)] {
+                        let (ni, nj) = (i as i32 + di, j as i32 + dj);
+                        if ni < 0 || ni >= cw as i32 || nj >= ch as i32 {
+                            continue;
+                        }
+                        let n = nj as usize * cw + ni as usize;
+                        if a.edge(&coarse[n], cos_crease) {
+                            flagged[j * cw + i] = true;
+                            flagged[n] = true;
+                        }
+                    }
+                }
+            }
+            let candidate = |px: i32, py: i32| {
+                let (ci, cj) = (px + margin, py + margin);
+                (cj - reach..=cj + reach).any(|j| {
+                    (ci - reach..=ci + reach).any(|i| flagged[j as usize * cw + i as usize])
+                })
+            };
+            let candidates: Vec<bool> = (0..rows as i32)
+                .flat_map(|py| (0..w as i32).map(move |px| (px, py)))
+                .map(|(px, py)| candidate(px, py))
+                .collect();
+            // Sub-pixel positions of candidate pixels and their stencils.
+            let mut needed = vec![false; gw * gh];
+            for py in 0..rows as i32 {
+                for px in 0..w as i32 {
+                    if !candidates[(py as u32 * w + px as u32) as usize] {
+                        continue;
+                    }
+                    for j in py * s..(py + 1) * s + 2 * halo {
+                        for i in px * s..(px + 1) * s + 2 * halo {
+                            needed[j as usize * gw + i as usize] = true;
+                        }
+                    }
+                }
+            }
             let mut grid = Vec::with_capacity(gw * gh);
             for j in 0..gh {
                 for i in 0..gw {
+                    if !needed[j * gw + i] {
+                        // Never compared with a candidate's position.
+                        grid.push(Feature::NOTHING);
+                        continue;
+                    }
                     let gx = gx0 + i as i32;
                     let gy = gy0 + j as i32;
                     let p = Vec2::new((gx as f32 + 0.5) / s as f32, (gy as f32 + 0.5) / s as f32);
@@ -312,6 +396,9 @@ pub fn render_lines(
             let per_pixel = 1.0 / (s * s) as f32;
             for py in 0..rows as i32 {
                 for px in 0..w as i32 {
+                    if !candidates[(py as u32 * w + px as u32) as usize] {
+                        continue;
+                    }
                     let mut ink = 0;
                     for sy in 0..s {
                         for sx in 0..s {

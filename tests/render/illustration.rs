@@ -907,7 +907,11 @@ fn borders_of_an_open_mesh_are_lines_in_pixels_and_in_the_svg() {
         .collect();
     assert_eq!(rim.len(), 4);
     // Creases off: only borders and silhouettes remain.
-    let lines = overlay(&open, &line_settings(w, h, 180.0), IntegratorKind::Recursive);
+    let lines = overlay(
+        &open,
+        &line_settings(w, h, 180.0),
+        IntegratorKind::Recursive,
+    );
     for e in &rim {
         let (a, b) = (cam.project(e.0), cam.project(e.1));
         for k in 1..30 {
