@@ -2,8 +2,13 @@
 //! Ogaki and Georgiev 2018): silhouettes, creases, borders of open meshes
 //! and material boundaries, as an anti-aliased coverage mask.
 //!
-//! Every pixel is divided into a fixed grid of [`SUBSAMPLES`] x
-//! [`SUBSAMPLES`] sub-pixel positions, and one ray is cast through each.
+//! A first ray through every pixel centre finds the pixels within half the
+//! line width plus a pixel of two neighbouring centres that differ (see
+//! below); only those candidates are divided into a fixed grid of
+//! [`SUBSAMPLES`] x [`SUBSAMPLES`] sub-pixel positions, with one ray cast
+//! through each (and through the positions their stencils reach). A
+//! feature no pixel-centre ray sees differ from its neighbours (something
+//! thinner than a pixel between centres) is missed.
 //! A ray that meets a perfect mirror or clear glass (a surface without a
 //! lit lobe) is followed through it (refraction when it exists, reflection
 //! otherwise) up to the settings' `max_depth`, so lines appear in mirrors
