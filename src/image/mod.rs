@@ -3,6 +3,7 @@
 //! metrics between images.
 
 pub mod film;
+pub mod lines;
 pub mod metrics;
 pub mod output;
 pub mod shard;

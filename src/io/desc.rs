@@ -70,6 +70,12 @@ pub struct SettingsDesc {
     pub light_samples: Option<u32>,
     /// Russian roulette start depth; `Some(None)` turns it off.
     pub rr_start_depth: Option<Option<u32>>,
+    /// Shading style.
+    pub style: Option<crate::core::settings::Style>,
+    /// Gooch parameters.
+    pub gooch: Option<crate::core::settings::GoochParams>,
+    /// Feature lines to draw.
+    pub lines: Option<crate::core::settings::LineSettings>,
     /// Random numbers.
     pub sampler: Option<crate::core::rng::SamplerKind>,
 }
@@ -99,6 +105,9 @@ impl SettingsDesc {
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
             window: None,
+            style: self.style.or(under.style).unwrap_or(d.style),
+            gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
+            lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
         }
     }

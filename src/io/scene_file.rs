@@ -55,6 +55,12 @@ struct FileSettings {
     light_samples: Option<u32>,
     /// Russian roulette start depth; `false` turns it off.
     russian_roulette: Option<FileRoulette>,
+    /// `"shaded"` or `"gooch"`.
+    style: Option<FileStyle>,
+    /// Gooch parameters (each optional).
+    gooch: Option<FileGooch>,
+    /// Feature lines; the table's presence turns them on.
+    lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
 }
@@ -64,6 +70,30 @@ struct FileSettings {
 enum FileSampler {
     Sobol,
     Hash,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileStyle {
+    Shaded,
+    Gooch,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FileGooch {
+    b: Option<f32>,
+    y: Option<f32>,
+    alpha: Option<f32>,
+    beta: Option<f32>,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FileLines {
+    width: Option<f32>,
+    color: Option<[f32; 3]>,
+    crease_angle: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -439,6 +469,31 @@ impl Ctx<'_> {
         {
             return Err(self.err(format!("settings.exposure must be finite, got {e}")));
         }
+        let gooch = s.gooch.map(|g| {
+            let d = crate::core::settings::GoochParams::default();
+            crate::core::settings::GoochParams {
+                b: g.b.unwrap_or(d.b),
+                y: g.y.unwrap_or(d.y),
+                alpha: g.alpha.unwrap_or(d.alpha),
+                beta: g.beta.unwrap_or(d.beta),
+            }
+        });
+        if let Some(g) = &gooch {
+            g.validate()
+                .map_err(|e| self.err(format!("settings.gooch: {e}")))?;
+        }
+        let lines = s.lines.map(|l| {
+            let d = crate::core::settings::LineSettings::default();
+            crate::core::settings::LineSettings {
+                width: l.width.unwrap_or(d.width),
+                color: l.color.unwrap_or(d.color),
+                crease_degrees: l.crease_angle.unwrap_or(d.crease_degrees),
+            }
+        });
+        if let Some(l) = &lines {
+            l.validate()
+                .map_err(|e| self.err(format!("settings.lines: {e}")))?;
+        }
         Ok(SettingsDesc {
             width: s.width,
             height: s.height,
@@ -457,6 +512,12 @@ impl Ctx<'_> {
                 FileRoulette::Enabled(false) => None,
                 FileRoulette::StartDepth(d) => Some(d),
             }),
+            style: s.style.map(|t| match t {
+                FileStyle::Shaded => crate::core::settings::Style::Shaded,
+                FileStyle::Gooch => crate::core::settings::Style::Gooch,
+            }),
+            gooch,
+            lines,
             sampler: s.sampler.map(|k| match k {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,

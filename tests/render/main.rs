@@ -16,12 +16,15 @@
 //! * `cargo test --test render scene_updates::` — incremental scene updates
 //!   against scenes built from scratch, progressive accumulation;
 //! * `cargo test --test render shards::` — region and sample-range shards
-//!   written, read back and merged against the single render, bit for bit.
+//!   written, read back and merged against the single render, bit for bit;
+//! * `cargo test --test render illustration::` — Gooch shading against its
+//!   closed form, feature lines and their vector (SVG) form.
 
 #[path = "../common/mod.rs"]
 mod common;
 
 mod analytic;
+mod illustration;
 mod large_worlds;
 mod path;
 mod robustness;

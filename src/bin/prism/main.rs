@@ -20,6 +20,7 @@ mod render;
 mod shard;
 mod stats;
 mod tradeoff;
+mod vector;
 
 #[derive(Subcommand, Debug)]
 enum Command {
