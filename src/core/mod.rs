@@ -2,6 +2,7 @@
 //! and colours, random numbers and sampling warps, optics formulas, errors,
 //! and the render settings with their limits. Imports nothing of the crate.
 
+pub mod clip;
 pub mod error;
 pub mod math;
 pub mod optics;

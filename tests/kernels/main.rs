@@ -15,6 +15,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod accel;
 mod bvh;
 mod properties;
 mod simd;
