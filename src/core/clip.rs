@@ -287,9 +287,10 @@ pub fn clip_polygon_homogeneous(poly: &[DVec4]) -> Vec<DVec4> {
             break;
         }
     }
-    // The first plane is met exactly up to rounding; keep it exact.
+    // Interpolation rounds: put every vertex exactly inside, so that
+    // `|x / w|, |y / w| <= 1` holds after the divide too.
     for p in &mut cur {
-        p.w = p.w.max(MIN_W);
+        *p = inside_view(*p);
     }
     cur
 }
@@ -318,12 +319,16 @@ pub fn clip_line_homogeneous(a: DVec4, b: DVec4) -> Option<(f64, f64, DVec4, DVe
     if t0 > t1 {
         return None;
     }
-    let at = |t: f64| {
-        let mut p = a + (b - a) * t;
-        p.w = p.w.max(MIN_W);
-        p
-    };
+    let at = |t: f64| inside_view(a + (b - a) * t);
     Some((t0, t1, at(t0), at(t1)))
+}
+
+/// `p` moved onto the view volume where rounding left it a hair outside.
+fn inside_view(mut p: DVec4) -> DVec4 {
+    p.w = p.w.max(MIN_W);
+    p.x = p.x.clamp(-p.w, p.w);
+    p.y = p.y.clamp(-p.w, p.w);
+    p
 }
 
 /// The perspective divide of a clipped point: `(x/w, y/w, z/w)`. `None`

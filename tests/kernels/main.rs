@@ -17,6 +17,7 @@ mod common;
 
 mod accel;
 mod bvh;
+mod clip;
 mod properties;
 mod simd;
 mod watertight;
