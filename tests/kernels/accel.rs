@@ -335,11 +335,21 @@ fn dda_ray_starting_inside_the_grid() {
     assert!(hits > 200, "{hits}");
 }
 
-/// Direction components of `-0.0` and `+0.0` give the same hits.
+/// Direction components of `-0.0` and `+0.0` give the same hits, found
+/// after walking through empty cells (only the far layer of the lattice
+/// is kept).
 #[test]
 fn dda_negative_zero_direction_components() {
-    let data = lattice(5);
+    let mut data = lattice(5);
+    let far: Vec<[u32; 3]> = data
+        .indices
+        .iter()
+        .copied()
+        .filter(|t| data.positions[t[0] as usize].z > 0.8 || data.positions[t[0] as usize].z == 0.0)
+        .collect();
+    data.indices = far;
     let meshes = every_structure(&data);
+    assert!(meshes[2].grid().unwrap().resolution()[2] >= 5);
     let s = 1.0 / 5.0;
     let mut hits = 0;
     for i in 0..5 {
@@ -382,4 +392,46 @@ fn dda_closest_hit_in_a_later_cell_than_the_first_found() {
     assert!(far.t > 0.6, "{far:?}");
     let meshes = every_structure(&data);
     assert!(agree(&meshes, &ray, 0.0, f32::INFINITY, "later cell"));
+}
+
+/// A flat sheet whose shared edges lie on the grid's cell boundaries,
+/// seen from 10^5 away: the watertight test's rounding of `vertex -
+/// origin` (several 1e-3 here, from origins 5e4 away along x and y) gives rays that pass just left of an edge to
+/// the triangle on its right, whose cells start at that boundary. The
+/// walk must visit the neighbour cells within the margin to find it, as
+/// the BVH's padded boxes do.
+#[test]
+fn dda_far_rays_across_edges_on_cell_boundaries() {
+    let m = 54u32;
+    let mut data = MeshData::default();
+    for j in 0..=m {
+        for i in 0..=m {
+            data.positions.push(Vec3::new(i as f32 / m as f32, j as f32 / m as f32, 0.0));
+        }
+    }
+    for j in 0..m {
+        for i in 0..m {
+            let a = j * (m + 1) + i;
+            data.indices.push([a, a + 1, a + m + 1]);
+            data.indices.push([a + 1, a + m + 2, a + m + 1]);
+        }
+    }
+    // Two specks give the grid a depth of 1 (54 thin layers of cells).
+    let k = data.positions.len() as u32;
+    for z in [-0.5, 0.5] {
+        data.positions.extend([Vec3::new(0.5, 0.5, z), Vec3::new(0.5001, 0.5, z), Vec3::new(0.5, 0.5001, z)]);
+    }
+    data.indices.extend([[k, k + 1, k + 2], [k + 3, k + 4, k + 5]]);
+    let meshes = every_structure(&data);
+    assert_eq!(meshes[2].grid().unwrap().resolution(), [m, m, m]);
+    let mut rng = Rng(31);
+    let mut hits = 0;
+    for _ in 0..4000 {
+        let i = 1 + rng.below(m as usize - 1);
+        let x = i as f32 / m as f32 + rng.range(-1e-2, 1e-2);
+        let target = Vec3::new(x, rng.range(0.05, 0.95), 0.0);
+        let o = target + Vec3::new(rng.range(-5e4, 5e4), rng.range(-5e4, 5e4), 1e5);
+        hits += agree(&meshes, &Ray::new(o.into(), (target - o).into()), 0.0, f32::INFINITY, "far sheet") as u32;
+    }
+    assert!(hits > 3900, "{hits}");
 }
