@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::accel::build::padded_aabb;
 /// Re-exported: a mesh is built with one of these presets.
-pub use crate::accel::build::{BuildQuality, MAX_COORDINATE};
+pub use crate::accel::build::{BuildOptions, BuildQuality, MAX_COORDINATE};
 use crate::accel::bvh8::{Bvh8, MAX_LEAF};
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;

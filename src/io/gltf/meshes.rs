@@ -103,7 +103,13 @@ fn build_primitive(
         uvs,
         indices: triangles,
     };
-    Mesh::new(label, data, normal_mode, st.quality)
+    Mesh::with_accel(
+        label,
+        data,
+        normal_mode,
+        st.quality.quality,
+        st.quality.accel.unwrap_or_default(),
+    )
         .map(Some)
         .map_err(fail)
 }

@@ -89,7 +89,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::core::error::Error;
-use crate::geometry::mesh::{BuildQuality, Mesh};
+use crate::geometry::mesh::{BuildOptions, Mesh};
 use crate::io::desc::SceneDesc;
 use crate::scene::material::{ImageTexture, Material};
 
@@ -118,7 +118,7 @@ use nodes::build_scene;
 ///
 /// [`Error::Load`] naming `path` and what is wrong with the file or with
 /// a file it references.
-pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc> {
+pub fn load_gltf(path: &Path, quality: impl Into<BuildOptions>) -> crate::Result<SceneDesc> {
     let bytes = crate::io::read_regular_file(path)
         .map_err(|e| Error::load(path, format!("cannot read file: {e}")))?;
     load_gltf_bytes(&bytes, path, quality)
@@ -131,8 +131,9 @@ pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc>
 pub fn load_gltf_bytes(
     bytes: &[u8],
     path: &Path,
-    quality: BuildQuality,
+    quality: impl Into<BuildOptions>,
 ) -> crate::Result<SceneDesc> {
+    let quality = quality.into();
     let mut state = State::default();
     let result = open(bytes, path).and_then(|ctx| build_scene(&ctx, &mut state, quality));
     state.print_warnings(path);
@@ -149,7 +150,7 @@ struct Ctx {
 /// Caches and warnings accumulated while building the scene.
 #[derive(Default)]
 struct State {
-    quality: BuildQuality,
+    quality: BuildOptions,
     meshes: HashMap<(usize, usize), Option<Arc<Mesh>>>,
     materials: HashMap<Option<usize>, Material>,
     decoded: HashMap<usize, image::DynamicImage>,
