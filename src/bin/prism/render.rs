@@ -109,7 +109,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         accel: args.accel.map(Into::into),
     };
     let desc = prism::io::load(&args.scene, options)?;
-    let mesh_accel = options.accel.or(desc.settings.accel).unwrap_or_default();
+    // What the meshes were built with (the scene's choice when no --accel).
+    let mut mesh_accel = options.accel.or(desc.settings.accel).unwrap_or_default();
     let mut accel_bytes = 0;
     let load_seconds = load_start.elapsed().as_secs_f64();
     let mut mesh_build_seconds = 0.0;
@@ -120,6 +121,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         {
             mesh_build_seconds += m.build_seconds;
             accel_bytes += m.accel_bytes();
+            mesh_accel = m.accel();
         }
     }
 
