@@ -138,7 +138,7 @@ fn scattered(n: usize) -> (RenderScene, Vec<Vec3>) {
         positions.push(p);
         instances.push(Instance::new(
             InstanceGeometry::Shape(Shape::Sphere { radius: 0.5 }),
-            &Transform::from_translation(p),
+            &Transform::from_translation(p.as_dvec3()),
             i as u32,
         ));
     }
@@ -199,7 +199,7 @@ fn tlas_update(c: &mut Criterion) {
                         let d = Vec3::new(0.3, 0.0, 0.2) * ((step % 20) as f32 - 10.0) * 0.05;
                         for i in 0..moved {
                             let k = (i * 7 + step as usize) % N;
-                            let t = Transform::from_translation(positions[k] + d);
+                            let t = Transform::from_translation((positions[k] + d).as_dvec3());
                             scene.set_instance_transform(k as u32, &t);
                         }
                         let u = scene.commit();

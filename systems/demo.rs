@@ -71,7 +71,7 @@ pub fn animate(
                 o.radius * a.sin(),
             );
         let mut new = *tr;
-        new.0.translation = p.into();
+        new.0.translation = p.as_dvec3();
         if new != *tr {
             *tr = new;
         }
@@ -80,7 +80,7 @@ pub fn animate(
         let r = Affine3A::from_translation(s.pivot)
             * Affine3A::from_rotation_y(s.speed * t)
             * Affine3A::from_translation(-s.pivot);
-        *tr = Transform(r * s.base.0);
+        *tr = Transform(r.as_daffine3() * s.base.0);
     }
 }
 
@@ -151,7 +151,7 @@ impl DemoScene {
             },
         ));
         world.spawn((
-            Transform(
+            Transform::from(
                 Affine3A::from_translation(Vec3::new(0.0, 2.6, -7.0))
                     * Affine3A::from_rotation_x(TAU / 4.0),
             ),
@@ -175,7 +175,10 @@ impl DemoScene {
             Vec3::new(2.0, 1.4, 2.5),
         ];
         for (i, &p) in spots.iter().enumerate() {
-            let base = Transform::from_trs(p, Quat::from_rotation_x(0.4 * i as f32), Vec3::ONE);
+            let base = Transform::from(Affine3A::from_rotation_translation(
+                Quat::from_rotation_x(0.4 * i as f32),
+                p,
+            ));
             world.spawn((
                 base,
                 MeshInstance(meshes[i % 2].clone()),
@@ -233,7 +236,7 @@ impl DemoScene {
                         if i & 2 == 0 { a.y } else { b.y },
                         if i & 4 == 0 { a.z } else { b.z },
                     );
-                    let w = o.transform.0.transform_point3(c);
+                    let w = o.transform.0.transform_point3(c.as_dvec3()).as_vec3();
                     lo = lo.min(w);
                     hi = hi.max(w);
                 }
@@ -257,7 +260,7 @@ impl DemoScene {
                         -(lo.z + hi.z) * 0.5,
                     ));
                 for (o, _) in kept {
-                    let base = Transform(fit * o.transform.0);
+                    let base = Transform(fit.as_daffine3() * o.transform.0);
                     if !base.is_valid() {
                         continue;
                     }
@@ -278,7 +281,7 @@ impl DemoScene {
         }
         // One fixed light and one wandering above the scene.
         world.spawn((
-            Transform::from_translation(Vec3::new(-6.0, 9.0, 8.0)),
+            Transform::from_translation(glam::DVec3::new(-6.0, 9.0, 8.0)),
             Light::Point {
                 intensity: Color::splat(250.0),
             },
@@ -298,8 +301,8 @@ impl DemoScene {
         ));
         world
             .spawn(Camera {
-                look_from: Vec3::new(0.0, 5.5, 14.0),
-                look_at: Vec3::new(0.0, 1.2, 0.0),
+                look_from: glam::DVec3::new(0.0, 5.5, 14.0),
+                look_at: glam::DVec3::new(0.0, 1.2, 0.0),
                 up: Vec3::Y,
                 vfov_degrees: 45.0,
                 name: None,

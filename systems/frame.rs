@@ -111,6 +111,42 @@ pub struct Frame {
     pub samples: u32,
 }
 
+/// Where the render origin (floating origin) goes. Entities keep their
+/// [`Transform`](crate::geometry::transform::Transform)s and cameras in
+/// world coordinates, in f64; before a frame, every placement is made
+/// relative to the render origin in f64 and only then rounded to the f32
+/// the kernels use, so precision depends on the distance to the render
+/// origin, not to the world origin. Moving the origin re-expresses every
+/// instance and light (a top-level BVH update; mesh BVHs live in object
+/// space and are never rebuilt). Insert this resource to change the
+/// default; the origin in use is reported in
+/// [`SceneUpdateReport::origin`].
+#[derive(Resource, Clone, Copy, Debug, PartialEq)]
+pub enum RenderOrigin {
+    /// Follow the active camera: the origin starts exactly at the camera
+    /// and jumps to it again whenever the camera is farther than
+    /// `recenter_distance` world units from it. Between jumps the camera
+    /// is at most that far from the origin, so everything within a
+    /// distance `r` of the camera is represented to about
+    /// `(recenter_distance + r) * 6e-8` (half an f32 ulp), whatever its
+    /// distance to the world origin.
+    FollowCamera {
+        /// How far the camera may move before the origin follows.
+        recenter_distance: f64,
+    },
+    /// A fixed world point.
+    Fixed(glam::DVec3),
+}
+
+impl Default for RenderOrigin {
+    /// Follows the camera, recentring after it has moved 64 units.
+    fn default() -> Self {
+        RenderOrigin::FollowCamera {
+            recenter_distance: 64.0,
+        }
+    }
+}
+
 /// What the last frame's scene update did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SceneUpdateReport {
@@ -126,6 +162,11 @@ pub struct SceneUpdateReport {
     pub rematerial: u32,
     /// The lights were gathered again.
     pub lights_changed: bool,
+    /// The render origin moved this frame: every instance and light was
+    /// re-expressed relative to it (a top-level update, no mesh BVH build).
+    pub rebased: bool,
+    /// The render origin (world coordinates) the frame was rendered in.
+    pub origin: glam::DVec3,
     /// The scene was created afresh (first frame, BVH quality change, or
     /// the previous scene still shared elsewhere).
     pub reset: bool,
@@ -148,5 +189,6 @@ impl SceneUpdateReport {
         self.reset
             || self.removed + self.added + self.moved + self.regeometry + self.rematerial > 0
             || self.lights_changed
+            || self.rebased
     }
 }

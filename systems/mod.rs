@@ -36,7 +36,7 @@ pub mod wavefront;
 pub use components::MeshInstance;
 pub use frame::{
     AccumulationState, ExtractedScene, Frame, ProgressFn, ProgressiveRendering, RenderConfig,
-    SceneAccel,
+    RenderOrigin, SceneAccel,
 };
 pub use render::{frame_preconditions, integrator_is, render_recursive};
 pub use renderer::Renderer;
@@ -160,13 +160,13 @@ pub fn run_frame(world: &mut World, schedule: &mut Schedule) {
 ///     .build(&mut world, &mut schedule);
 ///
 /// world.spawn((
-///     Transform::from_translation(Vec3::ZERO),
+///     Transform::default(), // world positions are f64 (`glam::DVec3`)
 ///     Shape::Sphere { radius: 1.0 },
 ///     Material::default(),
 ///     Spin,
 /// ));
 /// world.spawn((
-///     Transform::from_translation(Vec3::new(0.0, 4.0, 4.0)),
+///     Transform::from_translation(glam::DVec3::new(0.0, 4.0, 4.0)),
 ///     Light::Point { intensity: Vec3::splat(50.0) },
 /// ));
 /// world.spawn(Camera::default()); // at z = 5, looking at the origin

@@ -34,11 +34,11 @@ use std::time::Instant;
 use bevy_ecs::prelude::*;
 
 use super::components::MeshInstance;
-use super::{ExtractedScene, Frame, RenderConfig, SceneAccel};
+use super::{ExtractedScene, Frame, RenderConfig, RenderOrigin, SceneAccel};
 use crate::geometry::mesh::BuildQuality;
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
-use crate::scene::light::{Light, WorldLight};
+use crate::scene::light::Light;
 use crate::scene::material::Material;
 use crate::scene::{Instance, InstanceGeometry, RenderScene};
 
@@ -168,8 +168,10 @@ pub fn prepare_sync(world: &mut World) {
     {
         s.set_background(background);
     }
+    let rebased = choose_origin(world, !usable);
     let mut sync = world.resource_mut::<SceneSync>();
     sync.report = SceneUpdateReport::default();
+    sync.report.rebased = rebased;
     sync.fresh.clear();
     sync.regeometry.clear();
     sync.rematerial.clear();
@@ -183,6 +185,35 @@ pub fn prepare_sync(world: &mut World) {
         sync.quality = Some(quality);
         sync.report.reset = true;
     }
+}
+
+/// Moves the scene's render origin as [`RenderOrigin`] asks (the default
+/// follows the active camera); returns whether it moved. On a fresh scene
+/// a following origin starts exactly at the camera.
+fn choose_origin(world: &mut World, fresh: bool) -> bool {
+    let mode = world
+        .get_resource::<RenderOrigin>()
+        .copied()
+        .unwrap_or_default();
+    let chosen = world.resource::<RenderConfig>().camera;
+    let camera = {
+        let mut q = world.query::<(Entity, &crate::scene::camera::Camera)>();
+        match chosen {
+            Some(e) => q.get(world, e).ok().map(|(_, c)| c.look_from),
+            None => q.iter(world).min_by_key(|c| c.0).map(|(_, c)| c.look_from),
+        }
+    };
+    let mut accel = world.resource_mut::<SceneAccel>();
+    let scene = scene_mut(&mut accel);
+    let current = scene.origin();
+    let target = match mode {
+        RenderOrigin::Fixed(o) => o,
+        RenderOrigin::FollowCamera { recenter_distance } => match camera {
+            Some(c) if c.is_finite() && (fresh || (c - current).length() > recenter_distance) => c,
+            _ => current,
+        },
+    };
+    target.is_finite() && scene.set_origin(target)
 }
 
 /// Phase 1: objects that were despawned or lost their transform or
@@ -353,7 +384,7 @@ pub fn sync_geometry_and_materials(
         ls.sort_by_key(|l| l.0);
         scene.set_lights(
             ls.into_iter()
-                .map(|(_, l, t)| WorldLight::new(l, t.unwrap_or(&Transform::default())))
+                .map(|(_, l, t)| (*l, t.copied().unwrap_or_default()))
                 .collect(),
         );
         sync.lights_dirty = false;
@@ -373,10 +404,12 @@ pub fn commit_scene(
     let scene = scene_mut(&mut accel);
     let update = scene.commit();
     let counters = scene.tlas_counters();
+    let origin = scene.origin();
     let accel_seconds = start.elapsed().as_secs_f64();
     accel.build_seconds = accel_seconds;
     let report = &mut sync.report;
     report.tlas = update;
+    report.origin = origin;
     report.tlas_counters = counters;
     report.mesh_bvh_builds = crate::geometry::mesh::mesh_bvh_builds();
     report.sync_seconds = sync_seconds;
@@ -406,9 +439,12 @@ pub fn extract_camera(
 /// scratch: every object of `world` in entity order (instance `i` uses
 /// material `i`), the lights, and a freshly built top level. Returns the
 /// scene and the entity of each instance, or the message of an invalid
-/// transform. Used to check incremental updates.
+/// transform. The scene is expressed relative to `origin` (pass the
+/// incremental scene's [`RenderScene::origin`] to compare the two). Used to
+/// check incremental updates.
 pub fn scene_from_scratch(
     world: &mut World,
+    origin: glam::DVec3,
     background: crate::core::math::Color,
     quality: BuildQuality,
 ) -> Result<(RenderScene, Vec<Entity>), String> {
@@ -434,10 +470,10 @@ pub fn scene_from_scratch(
     ls.sort_by_key(|l| l.0);
     let lights = ls
         .into_iter()
-        .map(|(_, l, t)| WorldLight::new(l, t.unwrap_or(&Transform::default())))
+        .map(|(_, l, t)| (*l, t.copied().unwrap_or_default()))
         .collect();
     Ok((
-        RenderScene::new(instances, materials, lights, background, quality),
+        RenderScene::with_origin(origin, instances, materials, lights, background, quality),
         entities,
     ))
 }

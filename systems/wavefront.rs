@@ -555,9 +555,10 @@ pub fn render_wavefront(world: &mut World) {
     let shadows = features.needs_shadow_rays(settings.transport);
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
+    let camera = CameraRays::relative_to(&camera, scene.origin(), settings.width, settings.height);
     world.insert_resource(WavefrontFrame {
         scene,
-        camera: CameraRays::new(&camera, settings.width, settings.height),
+        camera,
         classes,
         batches: batches.clone(),
         batch: 0,

@@ -93,9 +93,9 @@ fn a_diffuse_only_scene_runs_no_reflection_or_refraction_stage() {
             MaterialClass::General,
             MaterialClass::Emissive,
         ] {
-            assert_eq!(hit_queue(&world, class).bytes(), 0, "{class:?}");
+            assert_eq!(hit_queue(world, class).bytes(), 0, "{class:?}");
         }
-        assert!(hit_queue(&world, MaterialClass::Diffuse).bytes() > 0);
+        assert!(hit_queue(world, MaterialClass::Diffuse).bytes() > 0);
         let scratch = world.resource::<StageScratch>();
         // No refraction queue ever; under Whitted transport no secondary
         // ray queue at all (diffuse surfaces spawn none), so one bounce.

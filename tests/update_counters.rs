@@ -11,7 +11,6 @@ mod common;
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use glam::Vec3;
 use prism::accel::tlas::{TlasCounters, TlasUpdate};
 use prism::core::math::{Color, Ray};
 use prism::core::settings::RenderSettings;
@@ -23,7 +22,7 @@ use prism::scene::light::Light;
 use prism::scene::material::Material;
 use prism::systems::MeshInstance;
 use prism::systems::sync::SceneSync;
-use prism::systems::{Frame, PrismPlugin, SceneAccel, run_frame};
+use prism::systems::{Frame, PrismPlugin, RenderOrigin, SceneAccel, run_frame};
 
 use common::render::plugin_world;
 
@@ -37,10 +36,13 @@ fn counters(world: &World) -> (TlasCounters, TlasUpdate, u64) {
     (u.tlas_counters, u.tlas, u.mesh_bvh_builds)
 }
 
-/// The material of the first hit along `ray`.
+/// The material of the first hit along `ray` (in world coordinates: moved
+/// into the scene's frame, centred on its render origin).
 fn material_hit(world: &World, ray: &Ray) -> Color {
     let scene = world.resource::<SceneAccel>().scene.clone().unwrap();
-    let hit = scene.intersect(ray, 0.0, f32::INFINITY).expect("hit");
+    let origin = (ray.origin.as_dvec3() - scene.origin()).as_vec3a();
+    let ray = Ray::new(origin, ray.direction);
+    let hit = scene.intersect(&ray, 0.0, f32::INFINITY).expect("hit");
     scene.materials()[hit.material as usize].base_color
 }
 
@@ -58,8 +60,11 @@ fn each_change_does_only_its_own_work() {
     // 20 objects on a grid: one change is 5% churn, below the threshold.
     let mut objects = Vec::new();
     for i in 0..20 {
-        let t =
-            Transform::from_translation(Vec3::new((i % 5) as f32 * 3.0, (i / 5) as f32 * 3.0, 0.0));
+        let t = Transform::from_translation(glam::DVec3::new(
+            (i % 5) as f64 * 3.0,
+            (i / 5) as f64 * 3.0,
+            0.0,
+        ));
         let mut e = world.spawn((t, Material::default()));
         if i % 2 == 0 {
             e.insert(MeshInstance(knots[i % 4 / 2].clone()));
@@ -69,14 +74,14 @@ fn each_change_does_only_its_own_work() {
         objects.push(e.id());
     }
     world.spawn((
-        Transform::from_translation(Vec3::new(0.0, 5.0, 10.0)),
+        Transform::from_translation(glam::DVec3::new(0.0, 5.0, 10.0)),
         Light::Point {
             intensity: Color::splat(100.0),
         },
     ));
     world.spawn(Camera {
-        look_from: Vec3::new(6.0, 4.5, 30.0),
-        look_at: Vec3::new(6.0, 4.5, 0.0),
+        look_from: glam::DVec3::new(6.0, 4.5, 30.0),
+        look_at: glam::DVec3::new(6.0, 4.5, 0.0),
         ..Default::default()
     });
     run_frame(&mut world, &mut schedule);
@@ -144,7 +149,7 @@ fn each_change_does_only_its_own_work() {
     // Spawn and despawn: one insert, one removal.
     let extra = world
         .spawn((
-            Transform::from_translation(Vec3::new(20.0, 0.0, 0.0)),
+            Transform::from_translation(glam::DVec3::new(20.0, 0.0, 0.0)),
             Shape::Sphere { radius: 0.5 },
         ))
         .id();
@@ -185,7 +190,7 @@ fn each_change_does_only_its_own_work() {
     }
     for x in [30.0, 33.0] {
         world.spawn((
-            Transform::from_translation(Vec3::new(x, 0.0, 0.0)),
+            Transform::from_translation(glam::DVec3::new(x, 0.0, 0.0)),
             Shape::Sphere { radius: 0.5 },
         ));
     }
@@ -197,4 +202,51 @@ fn each_change_does_only_its_own_work() {
     let u = world.resource::<Frame>().update;
     assert_eq!((u.removed, u.added, u.moved), (5, 2, 15));
     assert_eq!(mesh_bvh_builds(), built);
+
+    // The camera moves within the recentring distance: the render origin
+    // stays, nothing is re-committed.
+    let origin = world.resource::<Frame>().update.origin;
+    let camera = world
+        .query_filtered::<Entity, With<Camera>>()
+        .single(&world)
+        .unwrap();
+    world.get_mut::<Camera>(camera).unwrap().look_from.x += 10.0;
+    run_frame(&mut world, &mut schedule);
+    let (c5, u5, m5) = counters(&world);
+    assert_eq!(u5, TlasUpdate::Unchanged);
+    assert_eq!((c5, m5), (c4, m4));
+    assert_eq!(world.resource::<Frame>().update.origin, origin);
+    assert!(!world.resource::<Frame>().update.rebased);
+
+    // The camera travels 1e7 units: the render origin follows it. Every
+    // instance and light is re-expressed relative to it (a top-level
+    // update of every leaf, or a rebuild above the churn threshold), and
+    // no mesh BVH is built.
+    let far = glam::DVec3::new(1e7, -2e7, 3e7);
+    world.get_mut::<Camera>(camera).unwrap().look_from += far;
+    world.get_mut::<Camera>(camera).unwrap().look_at += far;
+    run_frame(&mut world, &mut schedule);
+    let (c6, u6, m6) = counters(&world);
+    let u = world.resource::<Frame>().update;
+    assert!(u.rebased && u.changed());
+    assert_eq!(u.origin, origin + glam::DVec3::new(10.0, 0.0, 0.0) + far);
+    let leaves = (c6.reinserts + c6.refits) - (c5.reinserts + c5.refits);
+    assert!(
+        (u6 == TlasUpdate::Rebuilt && c6.rebuilds == c5.rebuilds + 1)
+            || (u6 == TlasUpdate::Incremental && leaves == 17),
+        "{u6:?} {c5:?} {c6:?}"
+    );
+    assert_eq!(m6, m5, "moving the render origin built a mesh BVH");
+    assert_eq!(mesh_bvh_builds(), built);
+
+    // A fixed origin chosen by the game: the same, once.
+    world.insert_resource(RenderOrigin::Fixed(glam::DVec3::new(5.0, 5.0, 5.0)));
+    run_frame(&mut world, &mut schedule);
+    let u = world.resource::<Frame>().update;
+    assert!(u.rebased);
+    assert_eq!(u.origin, glam::DVec3::splat(5.0));
+    assert_eq!(u.mesh_bvh_builds, built);
+    run_frame(&mut world, &mut schedule);
+    assert!(!world.resource::<Frame>().update.rebased);
+    assert_eq!(world.resource::<Frame>().update.tlas, TlasUpdate::Unchanged);
 }

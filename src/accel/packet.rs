@@ -129,10 +129,10 @@ pub fn traverse<const AVX: bool>(
     };
     for a in 0..3 {
         lanes.near[a] = node_rays[alive.trailing_zeros() as usize].near[a] as usize;
-        for l in 0..LANES {
-            lanes.o_near[a][l] = node_rays[l].o_near[a];
-            lanes.o_far[a][l] = node_rays[l].o_far[a];
-            lanes.inv[a][l] = node_rays[l].inv[a];
+        for (l, r) in node_rays.iter().enumerate().take(LANES) {
+            lanes.o_near[a][l] = r.o_near[a];
+            lanes.o_far[a][l] = r.o_far[a];
+            lanes.inv[a][l] = r.inv[a];
         }
     }
     // A fixed part (nothing allocated per packet) and a spill for deeper

@@ -4,12 +4,54 @@
 //! dimension)`, so an image does not depend on the order in which pixels
 //! are rendered, on the thread count, or on the integrator's control flow.
 
-/// A hash-based sampler for one pixel sample. Successive calls to
-/// [`Sampler::next_f32`] advance the dimension.
+/// Which numbers a [`Sampler`] draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SamplerKind {
+    /// Owen-scrambled Sobol points (Burley 2020, through the
+    /// `sobol_burley` crate), padded in sets of four dimensions: the
+    /// samples of one pixel are stratified in every set of four
+    /// consecutive dimensions (pairs `(4k, 4k+1)` are the best
+    /// stratified), and the sets, the pixels and the seeds are
+    /// decorrelated by hashing them into the scrambling seed. Beyond 2^16
+    /// samples per pixel the numbers fall back to the hash.
+    #[default]
+    Sobol,
+    /// Independent hashed numbers (a splitmix64 finaliser): every
+    /// dimension of every sample is its own uniform number.
+    Hash,
+}
+
+impl SamplerKind {
+    /// The name used on the command line and in scene files.
+    pub fn name(self) -> &'static str {
+        match self {
+            SamplerKind::Sobol => "sobol",
+            SamplerKind::Hash => "hash",
+        }
+    }
+}
+
+/// Longest Sobol sequence per pixel (`sobol_burley`'s limit).
+const SOBOL_SAMPLES: u32 = 1 << 16;
+
+/// The sampler of one pixel sample. Successive calls to
+/// [`Sampler::next_f32`] advance the dimension; every number is a pure
+/// function of `(kind, seed, pixel, sample, dimension)`.
 #[derive(Clone, Copy, Debug)]
 pub struct Sampler {
+    /// Key of this (seed, pixel, sample): the hash sampler's numbers.
     key: u64,
+    /// Key of this (seed, pixel): the Sobol scrambles, shared by the
+    /// pixel's samples so that they stratify.
+    pixel_key: u64,
+    sample: u32,
     dimension: u32,
+    sobol: bool,
+    /// The Sobol set last computed (`u32::MAX`: none) and its four values:
+    /// one `sample_4d` call (SIMD) serves four draws.
+    cached_set: u32,
+    cached: [f32; 4],
 }
 
 /// A 64-bit finaliser (the "splitmix64" mixing function).
@@ -21,14 +63,32 @@ fn mix64(mut z: u64) -> u64 {
 }
 
 impl Sampler {
-    /// The sampler for sample `sample` of pixel `pixel` under `seed`.
+    /// The hash sampler for sample `sample` of pixel `pixel` under `seed`
+    /// (the same as [`Sampler::with_kind`] with [`SamplerKind::Hash`]).
     #[inline]
     pub fn new(seed: u64, pixel: u32, sample: u32) -> Self {
-        let key = mix64(seed ^ mix64(((pixel as u64) << 32) | sample as u64));
-        Self { key, dimension: 0 }
+        Self::with_kind(SamplerKind::Hash, seed, pixel, sample)
     }
 
-    /// Jumps to dimension `d` (integrators give each bounce a fixed range).
+    /// The sampler of `kind` for sample `sample` of pixel `pixel` under
+    /// `seed`.
+    #[inline]
+    pub fn with_kind(kind: SamplerKind, seed: u64, pixel: u32, sample: u32) -> Self {
+        let key = mix64(seed ^ mix64(((pixel as u64) << 32) | sample as u64));
+        let pixel_key = mix64(seed.rotate_left(17) ^ mix64(pixel as u64 ^ 0x5bd1_e995_0000_0000));
+        Self {
+            key,
+            pixel_key,
+            sample,
+            dimension: 0,
+            sobol: kind == SamplerKind::Sobol && sample < SOBOL_SAMPLES,
+            cached_set: u32::MAX,
+            cached: [0.0; 4],
+        }
+    }
+
+    /// Jumps to dimension `d` (integrators give each bounce a fixed
+    /// range, aligned to sets of four).
     #[inline]
     pub fn set_dimension(&mut self, d: u32) {
         self.dimension = d;
@@ -37,8 +97,20 @@ impl Sampler {
     /// The number for the current dimension in `[0, 1)`, then advances.
     #[inline]
     pub fn next_f32(&mut self) -> f32 {
-        let bits = mix64(self.key ^ mix64(self.dimension as u64 + 0x9e37_79b9_7f4a_7c15));
+        let d = self.dimension;
         self.dimension += 1;
+        if self.sobol {
+            // Dimension d is component d % 4 of the set d / 4; each set has
+            // its own scramble and index shuffle (Burley's padding).
+            let set = d / 4;
+            if set != self.cached_set {
+                let seed = mix64(self.pixel_key ^ set as u64);
+                self.cached = sobol_burley::sample_4d(self.sample, 0, (seed >> 32) as u32);
+                self.cached_set = set;
+            }
+            return self.cached[(d % 4) as usize];
+        }
+        let bits = mix64(self.key ^ mix64(d as u64 + 0x9e37_79b9_7f4a_7c15));
         // 24 random mantissa bits: exactly representable, strictly below 1.
         (bits >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }
@@ -48,14 +120,55 @@ impl Sampler {
 mod tests {
     use super::*;
 
+    /// The Sobol sampler's 64 samples of one pixel put exactly one point
+    /// in each cell of an 8x8 grid over the pair of dimensions (4k, 4k+1)
+    /// (the (0, 2)-sequence property, kept by Owen scrambling), and at
+    /// least one point per 4x4 cell of every other pair of its set; the
+    /// hash sampler does not (it fails with near certainty: the chance
+    /// that 64 independent points fill all 64 cells is 64!/64^64).
+    #[test]
+    fn sobol_samples_of_a_pixel_are_stratified() {
+        for (pixel, set) in [(0u32, 0u32), (12345, 3), (7, 40)] {
+            let points = |kind| {
+                (0..64)
+                    .map(|s| {
+                        let mut x = Sampler::with_kind(kind, 9, pixel, s);
+                        x.set_dimension(4 * set);
+                        [x.next_f32(), x.next_f32(), x.next_f32(), x.next_f32()]
+                    })
+                    .collect::<Vec<_>>()
+            };
+            let cells = |p: &[[f32; 4]], a: usize, b: usize, n: usize| {
+                let mut count = vec![0u32; n * n];
+                for q in p {
+                    let (i, j) = ((q[a] * n as f32) as usize, (q[b] * n as f32) as usize);
+                    count[i * n + j] += 1;
+                }
+                count
+            };
+            let sobol = points(SamplerKind::Sobol);
+            assert!(
+                cells(&sobol, 0, 1, 8).iter().all(|&c| c == 1),
+                "pixel {pixel} set {set}"
+            );
+            for (a, b) in [(0, 2), (0, 3), (1, 2), (1, 3), (2, 3)] {
+                assert!(cells(&sobol, a, b, 4).iter().all(|&c| c >= 1), "{a} {b}");
+            }
+            let hash = points(SamplerKind::Hash);
+            assert!(cells(&hash, 0, 1, 8).iter().any(|&c| c != 1));
+        }
+    }
+
     #[test]
     fn deterministic_and_in_range() {
-        let mut a = Sampler::new(7, 123, 4);
-        let mut b = Sampler::new(7, 123, 4);
-        for _ in 0..100 {
-            let x = a.next_f32();
-            assert_eq!(x, b.next_f32());
-            assert!((0.0..1.0).contains(&x));
+        for kind in [SamplerKind::Sobol, SamplerKind::Hash] {
+            let mut a = Sampler::with_kind(kind, 7, 123, 4);
+            let mut b = Sampler::with_kind(kind, 7, 123, 4);
+            for _ in 0..100 {
+                let x = a.next_f32();
+                assert_eq!(x, b.next_f32());
+                assert!((0.0..1.0).contains(&x));
+            }
         }
     }
 

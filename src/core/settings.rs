@@ -29,6 +29,9 @@ pub struct RenderSettings {
     /// Path tracing: bounce from which Russian roulette may end paths
     /// (`None`: never; paths run to `max_depth`).
     pub rr_start_depth: Option<u32>,
+    /// Where the random numbers come from: Owen-scrambled Sobol points
+    /// (stratified per pixel) or independent hashed numbers.
+    pub sampler: crate::core::rng::SamplerKind,
 }
 
 /// How light is transported: the model, orthogonal to the integrator that
@@ -108,6 +111,7 @@ impl Default for RenderSettings {
             transport: Transport::Whitted,
             light_samples: 1,
             rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
+            sampler: crate::core::rng::SamplerKind::default(),
         }
     }
 }

@@ -763,7 +763,7 @@ mod tests {
         };
         for i in 0..300 {
             // Straight down onto triangle i / 2, near its centre, or beside it.
-            let x = 1.5f32.powi((i / 2) as i32) * 1e-30;
+            let x = 1.5f32.powi(i / 2) * 1e-30;
             let dx = (next() - 0.5) * 0.05 * x;
             let dy = (next() - 0.5) * 0.05 * x;
             let o = Vec3A::new(x + dx, dy, x);

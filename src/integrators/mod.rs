@@ -13,6 +13,7 @@ use crate::core::rng::Sampler;
 use crate::core::settings::RenderSettings;
 use crate::image::film::PixelSum;
 use crate::integrators::counters::RenderCounters;
+use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
 
 /// Called with the number of rows finished since the last call.
@@ -38,9 +39,10 @@ pub fn accumulate(pixel: &mut PixelSum, sample: Color, counters: &mut RenderCoun
     }
 }
 
-/// Prepares camera rays for the settings' image size.
-pub fn camera_rays(camera: &Camera, settings: &RenderSettings) -> CameraRays {
-    CameraRays::new(camera, settings.width, settings.height)
+/// Prepares camera rays for the settings' image size, in the frame of
+/// `scene`'s render origin.
+pub fn camera_rays(scene: &RenderScene, camera: &Camera, settings: &RenderSettings) -> CameraRays {
+    CameraRays::relative_to(camera, scene.origin(), settings.width, settings.height)
 }
 
 /// Which integrator renders the image.

@@ -78,7 +78,7 @@ impl Accumulator {
         } else {
             self.samples
         };
-        let cam = camera_rays(camera, settings);
+        let cam = camera_rays(scene, camera, settings);
         let width = settings.width as usize;
         let counters = self
             .pixels

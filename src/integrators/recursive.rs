@@ -117,7 +117,7 @@ pub fn pixel_sample(
     counters: &mut RenderCounters,
 ) -> Color {
     let pixel = y * settings.width + x;
-    let mut sampler = Sampler::new(settings.seed, pixel, s);
+    let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
     let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
     counters.rays.camera += 1;
     match settings.transport {
@@ -134,7 +134,7 @@ pub fn render(
     progress: Option<Progress<'_>>,
 ) -> (Film, RenderCounters) {
     let mut film = Film::new(settings.width, settings.height);
-    let cam = camera_rays(camera, settings);
+    let cam = camera_rays(scene, camera, settings);
     let width = settings.width as usize;
     let counters = film
         .pixels

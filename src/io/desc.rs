@@ -73,6 +73,8 @@ pub struct SettingsDesc {
     /// Structure over mesh triangles asked for by the file (applied when
     /// it was loaded; kept for reporting).
     pub accel: Option<crate::core::settings::Accel>,
+    /// Random numbers.
+    pub sampler: Option<crate::core::rng::SamplerKind>,
 }
 
 impl SettingsDesc {
@@ -99,6 +101,7 @@ impl SettingsDesc {
                 .rr_start_depth
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
+            sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
         }
     }
 }

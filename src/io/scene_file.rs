@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Quat, Vec3};
+use glam::{DQuat, DVec3, Vec3};
 use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
@@ -57,6 +57,15 @@ struct FileSettings {
     russian_roulette: Option<FileRoulette>,
     /// Structure over mesh triangles: bvh, kdtree, grid or brute.
     accel: Option<crate::core::settings::Accel>,
+    /// `"sobol"` or `"hash"`.
+    sampler: Option<FileSampler>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileSampler {
+    Sobol,
+    Hash,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -76,8 +85,8 @@ enum FileRoulette {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct FileCamera {
-    look_from: [f32; 3],
-    look_at: [f32; 3],
+    look_from: [f64; 3],
+    look_at: [f64; 3],
     #[serde(default = "default_up")]
     up: [f32; 3],
     #[serde(default = "default_vfov")]
@@ -221,9 +230,9 @@ fn yes() -> bool {
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct FilePlacement {
-    translate: Option<[f32; 3]>,
+    translate: Option<[f64; 3]>,
     /// Degrees about X, then Y, then Z.
-    rotate: Option<[f32; 3]>,
+    rotate: Option<[f64; 3]>,
     scale: Option<FileColor>,
 }
 
@@ -241,20 +250,20 @@ struct FileObject {
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 enum FileLight {
     Point {
-        position: [f32; 3],
+        position: [f64; 3],
         #[serde(default = "white")]
         color: FileColor,
         intensity: f32,
     },
     Directional {
-        direction: [f32; 3],
+        direction: [f64; 3],
         #[serde(default = "white")]
         color: FileColor,
         illuminance: f32,
     },
     Spot {
-        position: [f32; 3],
-        direction: [f32; 3],
+        position: [f64; 3],
+        direction: [f64; 3],
         #[serde(default = "white")]
         color: FileColor,
         intensity: f32,
@@ -318,6 +327,17 @@ struct Ctx<'a> {
     path: &'a Path,
     base: &'a Path,
     quality: BuildOptions,
+}
+
+/// A finite point or vector of the file, in double precision (world
+/// positions keep every digit the file gives).
+fn finite3d(what: &str, v: [f64; 3]) -> std::result::Result<DVec3, String> {
+    let v = DVec3::from(v);
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be finite, got {v}"))
+    }
 }
 
 fn finite3(what: &str, v: [f32; 3]) -> std::result::Result<Vec3, String> {
@@ -400,7 +420,7 @@ impl Ctx<'_> {
             for c in &mut sub.cameras {
                 c.look_from = place.0.transform_point3(c.look_from);
                 c.look_at = place.0.transform_point3(c.look_at);
-                c.up = place.0.transform_vector3(c.up);
+                c.up = place.0.transform_vector3(c.up.as_dvec3()).as_vec3();
             }
             scene.append(sub);
         }
@@ -449,13 +469,17 @@ impl Ctx<'_> {
                 FileRoulette::StartDepth(d) => Some(d),
             }),
             accel: s.accel,
+            sampler: s.sampler.map(|k| match k {
+                FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
+                FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
+            }),
         })
     }
 
     fn camera(&self, c: &FileCamera) -> std::result::Result<Camera, String> {
         let cam = Camera {
-            look_from: finite3("camera.look_from", c.look_from)?,
-            look_at: finite3("camera.look_at", c.look_at)?,
+            look_from: finite3d("camera.look_from", c.look_from)?,
+            look_at: finite3d("camera.look_at", c.look_at)?,
             up: finite3("camera.up", c.up)?,
             vfov_degrees: c.vfov,
             name: None,
@@ -532,8 +556,8 @@ impl Ctx<'_> {
     }
 
     fn placement(&self, p: &FilePlacement) -> std::result::Result<Transform, String> {
-        let t = finite3("translate", p.translate.unwrap_or([0.0; 3]))?;
-        let r = finite3("rotate", p.rotate.unwrap_or([0.0; 3]))?;
+        let t = finite3d("translate", p.translate.unwrap_or([0.0; 3]))?;
+        let r = finite3d("rotate", p.rotate.unwrap_or([0.0; 3]))?;
         let s = match p.scale {
             Some(s) => s.get(),
             None => Vec3::ONE,
@@ -541,10 +565,10 @@ impl Ctx<'_> {
         if !s.is_finite() || s.min_element().abs() == 0.0 || s.abs().min_element() < 1e-30 {
             return Err(format!("scale must be finite and non-zero, got {s}"));
         }
-        let q = Quat::from_rotation_z(r.z.to_radians())
-            * Quat::from_rotation_y(r.y.to_radians())
-            * Quat::from_rotation_x(r.x.to_radians());
-        let xf = Transform::from_trs(t, q, s);
+        let q = DQuat::from_rotation_z(r.z.to_radians())
+            * DQuat::from_rotation_y(r.y.to_radians())
+            * DQuat::from_rotation_x(r.x.to_radians());
+        let xf = Transform::from_trs(t, q, s.as_dvec3());
         if !xf.is_valid() {
             return Err("transform is not invertible".into());
         }
@@ -686,15 +710,15 @@ impl Ctx<'_> {
             }
             non_negative("color", c.get()).map(|c| c * i)
         };
-        let aim = |pos: Vec3, dir: [f32; 3]| -> std::result::Result<Transform, String> {
-            let d = finite3("direction", dir)?;
+        let aim = |pos: DVec3, dir: [f64; 3]| -> std::result::Result<Transform, String> {
+            let d = finite3d("direction", dir)?;
             if d.length_squared() == 0.0 {
                 return Err("direction must not be zero".into());
             }
             let d = d.normalize();
             // Local -Z onto d.
-            let q = Quat::from_rotation_arc(Vec3::NEG_Z, d);
-            Ok(Transform::from_trs(pos, q, Vec3::ONE))
+            let q = DQuat::from_rotation_arc(DVec3::NEG_Z, d);
+            Ok(Transform::from_trs(pos, q, DVec3::ONE))
         };
         let (transform, light) = match l {
             FileLight::Point {
@@ -702,7 +726,7 @@ impl Ctx<'_> {
                 color,
                 intensity: i,
             } => (
-                Transform::from_translation(finite3("position", *position)?),
+                Transform::from_translation(finite3d("position", *position)?),
                 Light::Point {
                     intensity: intensity(*color, *i, "intensity")?,
                 },
@@ -712,7 +736,7 @@ impl Ctx<'_> {
                 color,
                 illuminance,
             } => (
-                aim(Vec3::ZERO, *direction)?,
+                aim(DVec3::ZERO, *direction)?,
                 Light::Directional {
                     illuminance: intensity(*color, *illuminance, "illuminance")?,
                 },
@@ -736,7 +760,7 @@ impl Ctx<'_> {
                     ));
                 }
                 (
-                    aim(finite3("position", *position)?, *direction)?,
+                    aim(finite3d("position", *position)?, *direction)?,
                     Light::Spot {
                         intensity: intensity(*color, *i, "intensity")?,
                         inner_angle: inner_angle.to_radians(),

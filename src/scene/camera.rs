@@ -1,17 +1,21 @@
 //! Pinhole camera: rays through an image plane.
 
 use bevy_ecs::component::Component;
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{DVec3, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
 
 /// A pinhole camera looking from `look_from` towards `look_at`.
+///
+/// Positions are world coordinates in double precision, like
+/// [`Transform`](crate::geometry::transform::Transform): a camera 1e9 units
+/// from the world origin keeps its sub-millimetre placement.
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct Camera {
-    /// Eye position.
-    pub look_from: Vec3,
-    /// A point the camera looks at.
-    pub look_at: Vec3,
+    /// Eye position (world coordinates).
+    pub look_from: DVec3,
+    /// A point the camera looks at (world coordinates).
+    pub look_at: DVec3,
     /// Approximate up direction (need not be orthogonal to the view).
     pub up: Vec3,
     /// Vertical field of view in degrees.
@@ -23,8 +27,8 @@ pub struct Camera {
 impl Default for Camera {
     fn default() -> Self {
         Self {
-            look_from: Vec3::new(0.0, 0.0, 5.0),
-            look_at: Vec3::ZERO,
+            look_from: DVec3::new(0.0, 0.0, 5.0),
+            look_at: DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 40.0,
             name: None,
@@ -42,7 +46,13 @@ impl Camera {
         if forward.length_squared() <= 0.0 {
             return Err("camera look_from and look_at are the same point".into());
         }
-        if forward.normalize().cross(self.up).length_squared() < 1e-12 {
+        if forward
+            .normalize()
+            .as_vec3()
+            .cross(self.up)
+            .length_squared()
+            < 1e-12
+        {
             return Err("camera up is parallel to the viewing direction".into());
         }
         if !(self.vfov_degrees > 0.0 && self.vfov_degrees < 180.0) {
@@ -68,17 +78,27 @@ pub struct CameraRays {
 }
 
 impl CameraRays {
-    /// Prepares `camera` for a `width` x `height` image; the aspect ratio is
-    /// the image's. The camera must pass [`Camera::validate`].
+    /// Prepares `camera` for a `width` x `height` image in world
+    /// coordinates (render origin at the world origin); the aspect ratio
+    /// is the image's. The camera must pass [`Camera::validate`].
     pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let forward = (camera.look_at - camera.look_from).normalize();
+        Self::relative_to(camera, DVec3::ZERO, width, height)
+    }
+
+    /// Prepares `camera` for a `width` x `height` image in the frame
+    /// centred on `origin` (a scene's
+    /// [`origin`](crate::scene::RenderScene::origin)): the eye is
+    /// `look_from - origin`, subtracted in f64, and the viewing direction
+    /// is computed in f64 before rounding.
+    pub fn relative_to(camera: &Camera, origin: DVec3, width: u32, height: u32) -> Self {
+        let forward = (camera.look_at - camera.look_from).normalize().as_vec3();
         let right = forward.cross(camera.up).normalize();
         let up = right.cross(forward);
         let half_h = (camera.vfov_degrees.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height as f32;
         let top_left = forward - right * half_w + up * half_h;
         Self {
-            origin: camera.look_from.into(),
+            origin: (camera.look_from - origin).as_vec3a(),
             top_left: top_left.into(),
             dx: (right * (2.0 * half_w / width as f32)).into(),
             dy: (-up * (2.0 * half_h / height as f32)).into(),

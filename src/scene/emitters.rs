@@ -433,7 +433,7 @@ mod tests {
             ),
             Instance::new(
                 InstanceGeometry::Shape(square),
-                &Transform::from_trs(
+                &Transform::from_trs_f32(
                     Vec3::new(0.0, 3.0, 0.0),
                     Quat::from_rotation_x(0.3),
                     Vec3::ONE,
@@ -442,7 +442,7 @@ mod tests {
             ),
             Instance::new(
                 InstanceGeometry::Shape(Shape::Disk { radius: 0.5 }),
-                &Transform::from_trs(
+                &Transform::from_trs_f32(
                     Vec3::new(4.0, 1.0, 0.0),
                     Quat::IDENTITY,
                     Vec3::new(2.0, 1.0, 3.0),
@@ -451,7 +451,7 @@ mod tests {
             ),
             Instance::new(
                 InstanceGeometry::Shape(Shape::Sphere { radius: 0.8 }),
-                &Transform::from_trs(
+                &Transform::from_trs_f32(
                     Vec3::new(-3.0, 1.0, 0.0),
                     Quat::from_rotation_y(0.7),
                     stretch,

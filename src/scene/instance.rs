@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use glam::{Vec2, Vec3A};
+use glam::{DVec3, Vec2, Vec3A};
 use obvhs::aabb::Aabb;
 
 use crate::accel::build::{MAX_COORDINATE, padded_aabb};
@@ -27,20 +27,33 @@ pub enum InstanceGeometry {
 pub struct Instance {
     /// Shape or mesh.
     pub geometry: InstanceGeometry,
-    /// World/object matrices.
+    /// The placement in world coordinates, in double precision.
+    pub world: Transform,
+    /// Object/render-frame matrices: `world` relative to the scene's
+    /// render origin, in single precision (see
+    /// [`RenderScene::origin`](crate::scene::RenderScene::origin)).
     pub transform: InstanceTransform,
     /// Index into [`RenderScene::materials`](crate::scene::RenderScene::materials).
     pub material: u32,
 }
 
 impl Instance {
-    /// Creates an instance; the transform must be valid.
+    /// Creates an instance; the transform must be valid. Its render-frame
+    /// matrices are relative to the world origin until a scene rebases
+    /// them ([`Instance::rebase`]; [`RenderScene`](crate::scene::RenderScene)
+    /// does when the instance is added).
     pub fn new(geometry: InstanceGeometry, transform: &Transform, material: u32) -> Self {
         Self {
             geometry,
-            transform: InstanceTransform::new(transform),
+            world: *transform,
+            transform: InstanceTransform::placed(transform, DVec3::ZERO),
             material,
         }
+    }
+
+    /// Recomputes the render-frame matrices relative to `origin`.
+    pub fn rebase(&mut self, origin: DVec3) {
+        self.transform = InstanceTransform::placed(&self.world, origin);
     }
 
     /// Where the top level puts this instance.
@@ -85,7 +98,8 @@ impl Instance {
 pub struct Hit {
     /// Ray parameter.
     pub t: f32,
-    /// World-space position.
+    /// Position in the scene's render frame: the world point minus
+    /// [`RenderScene::origin`](crate::scene::RenderScene::origin).
     pub point: Vec3A,
     /// Unit geometric normal in world space, as the geometry defines it
     /// (outward for closed shapes; not flipped towards the ray).

@@ -1,7 +1,7 @@
 //! Punctual lights in glTF's photometric units.
 
 use bevy_ecs::component::Component;
-use glam::Vec3A;
+use glam::{DVec3, Vec3A};
 
 use crate::core::math::Color;
 use crate::geometry::transform::Transform;
@@ -76,14 +76,17 @@ pub struct LightSample {
 }
 
 impl WorldLight {
-    /// Resolves a light component with its transform.
-    pub fn new(light: &Light, transform: &Transform) -> Self {
-        let position = transform.0.translation;
+    /// Resolves a light component with its transform, in the frame
+    /// centred on `origin` (the scene's render origin; the subtraction is
+    /// done in f64).
+    pub fn new(light: &Light, transform: &Transform, origin: DVec3) -> Self {
+        let position = (transform.0.translation - origin).as_vec3a();
         let axis = transform
             .0
             .matrix3
-            .mul_vec3a(Vec3A::NEG_Z)
-            .normalize_or(Vec3A::NEG_Z);
+            .mul_vec3(DVec3::NEG_Z)
+            .normalize_or(DVec3::NEG_Z)
+            .as_vec3a();
         match *light {
             Light::Point { intensity } => WorldLight::Point {
                 position,

@@ -8,7 +8,10 @@ use crate::accel::tlas::Tlas;
 use crate::core::math::Color;
 use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
-use crate::scene::light::WorldLight;
+use glam::DVec3;
+
+use crate::geometry::transform::Transform;
+use crate::scene::light::{Light, WorldLight};
 use crate::scene::material::Material;
 
 /// A scene ready for rendering: instances, top-level BVH, materials, lights.
@@ -18,7 +21,14 @@ pub struct RenderScene {
     pub(super) instances: Vec<Instance>,
     /// Materials referenced by instances.
     pub(super) materials: Vec<Material>,
-    /// Lights in world space.
+    /// The render origin: the world point (f64) that the kernels' frame is
+    /// centred on. Instances, lights and cameras are made relative to it in
+    /// f64 before they are rounded to f32.
+    pub(super) origin: DVec3,
+    /// Lights as placed in the world (f64), kept to re-resolve them when
+    /// the origin moves.
+    pub(super) light_sources: Vec<(Light, Transform)>,
+    /// Lights in the render frame.
     pub(super) lights: Vec<WorldLight>,
     /// Radiance of escaped rays.
     pub(super) background: Color,
@@ -38,20 +48,50 @@ pub struct RenderScene {
 }
 
 impl RenderScene {
-    /// Builds the top-level BVH over `instances`.
+    /// Builds the top-level BVH over `instances`, with the render origin at
+    /// the world origin.
     pub fn new(
         instances: Vec<Instance>,
         materials: Vec<Material>,
-        lights: Vec<WorldLight>,
+        lights: Vec<(Light, Transform)>,
+        background: Color,
+        quality: BuildQuality,
+    ) -> Self {
+        Self::with_origin(
+            DVec3::ZERO,
+            instances,
+            materials,
+            lights,
+            background,
+            quality,
+        )
+    }
+
+    /// Builds the top-level BVH over `instances` in the frame centred on
+    /// `origin` (see [`RenderScene::origin`]).
+    pub fn with_origin(
+        origin: DVec3,
+        mut instances: Vec<Instance>,
+        materials: Vec<Material>,
+        light_sources: Vec<(Light, Transform)>,
         background: Color,
         quality: BuildQuality,
     ) -> Self {
         let start = Instant::now();
+        for inst in &mut instances {
+            inst.rebase(origin);
+        }
+        let lights = light_sources
+            .iter()
+            .map(|(l, t)| WorldLight::new(l, t, origin))
+            .collect();
         let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
             instances,
             materials,
+            origin,
+            light_sources,
             lights,
             background,
             emitters,
@@ -59,6 +99,14 @@ impl RenderScene {
             tlas,
             tlas_build_seconds: start.elapsed().as_secs_f64(),
         }
+    }
+
+    /// The render origin: the world point, in f64, at the centre of the
+    /// single-precision frame that instances, lights, hits and rays live
+    /// in. A world point `p` is `p - origin` in that frame; cameras are
+    /// made relative to it by [`CameraRays::relative_to`](crate::scene::camera::CameraRays::relative_to).
+    pub fn origin(&self) -> DVec3 {
+        self.origin
     }
 
     /// Total triangles over all instances (instanced meshes count once per

@@ -5,9 +5,10 @@ use crate::core::math::Color;
 use crate::geometry::transform::Transform;
 use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
-use crate::scene::light::WorldLight;
+use crate::scene::light::{Light, WorldLight};
 use crate::scene::material::Material;
 use crate::scene::render_scene::RenderScene;
+use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.
 ///
@@ -20,8 +21,9 @@ use crate::scene::render_scene::RenderScene;
 impl RenderScene {
     /// Appends an instance; returns its index. Its material index must be
     /// valid once the scene is committed.
-    pub fn push_instance(&mut self, instance: Instance) -> u32 {
+    pub fn push_instance(&mut self, mut instance: Instance) -> u32 {
         self.emitters_stale = true;
+        instance.rebase(self.origin);
         let index = self.instances.len() as u32;
         self.tlas.inserted(index, instance.placement());
         self.instances.push(instance);
@@ -48,7 +50,8 @@ impl RenderScene {
     pub fn set_instance_transform(&mut self, index: u32, transform: &Transform) {
         self.emitters_stale = true;
         let inst = &mut self.instances[index as usize];
-        inst.transform = crate::geometry::transform::InstanceTransform::new(transform);
+        inst.world = *transform;
+        inst.rebase(self.origin);
         self.tlas.updated(index, inst.placement());
     }
 
@@ -101,9 +104,35 @@ impl RenderScene {
         self.materials.swap_remove(index as usize)
     }
 
-    /// Replaces the lights.
-    pub fn set_lights(&mut self, lights: Vec<WorldLight>) {
-        self.lights = lights;
+    /// Replaces the lights (placed in world coordinates).
+    pub fn set_lights(&mut self, lights: Vec<(Light, Transform)>) {
+        self.lights = lights
+            .iter()
+            .map(|(l, t)| WorldLight::new(l, t, self.origin))
+            .collect();
+        self.light_sources = lights;
+    }
+
+    /// Moves the render origin to `origin` (a world point, f64): every
+    /// instance and light is re-expressed relative to it, and the top
+    /// level is updated at the next commit. No mesh BVH is touched (they
+    /// live in object space). Returns whether the origin changed.
+    pub fn set_origin(&mut self, origin: DVec3) -> bool {
+        if origin == self.origin {
+            return false;
+        }
+        self.origin = origin;
+        self.emitters_stale = true;
+        for (i, inst) in self.instances.iter_mut().enumerate() {
+            inst.rebase(origin);
+            self.tlas.updated(i as u32, inst.placement());
+        }
+        self.lights = self
+            .light_sources
+            .iter()
+            .map(|(l, t)| WorldLight::new(l, t, origin))
+            .collect();
+        true
     }
 
     /// Sets the radiance of escaped rays.

@@ -335,4 +335,58 @@ intensity = 40
     std::fs::write(&bad_scene, "[settings]\naccel = \"octree\"\n").unwrap();
     let out = dir.path().join("bad2.png");
     assert_clean_failure(&render(&bad_scene, &out, &[]), &out, &["accel"]);
+/// `--render-origin`: a scene translated by 1e7 renders (EXR, bit for bit)
+/// as at the origin by default, and visibly worse with the kernels centred
+/// on the world origin.
+#[test]
+fn render_origin_follows_the_camera_unless_asked_otherwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |t: f64| {
+        let p = |x: f64, y: f64, z: f64| format!("[{:?}, {:?}, {:?}]", t + x, t + y, t + z);
+        format!(
+            r#"
+[settings]
+width = 48
+height = 36
+[camera]
+look_from = {cam}
+look_at = {at}
+[[objects]]
+shape = {{ type = "sphere", radius = 0.75 }}
+translate = {ball}
+material = {{ color = 0.9, diffuse = 0.05, mirror = 0.9 }}
+[[objects]]
+shape = {{ type = "plane" }}
+translate = {floor}
+material = {{ texture = {{ checker = {{ scale = 0.5, even = 0.9, odd = 0.2 }} }} }}
+[[lights]]
+type = "point"
+position = {light}
+intensity = 60
+"#,
+            cam = p(0.0, 1.5, 5.0),
+            at = p(0.0, 0.75, 0.0),
+            ball = p(0.0, 0.75, 0.0),
+            floor = p(0.0, 0.0, 0.0),
+            light = p(2.0, 5.0, 3.0),
+        )
+    };
+    let near = dir.path().join("near.toml");
+    let far = dir.path().join("far.toml");
+    std::fs::write(&near, scene(0.0)).unwrap();
+    std::fs::write(&far, scene(1e7)).unwrap();
+    let read = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    for (input, output, extra) in [
+        (&near, "near.exr", &[][..]),
+        (&far, "far.exr", &[][..]),
+        (&far, "far-world.exr", &["--render-origin", "world"][..]),
+    ] {
+        assert_success(&render(input, &dir.path().join(output), extra));
+    }
+    assert_eq!(
+        read("near.exr"),
+        read("far.exr"),
+        "the default origin is the camera"
+    );
+    assert_ne!(read("near.exr"), read("far-world.exr"));
 }

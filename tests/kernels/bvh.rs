@@ -98,7 +98,7 @@ fn random_transform(rng: &mut Rng, spread: f32) -> Transform {
         rng.range(0.3, 2.0),
         rng.range(0.3, 2.0),
     );
-    Transform::from_trs(
+    Transform::from_trs_f32(
         rng.vec(-spread, spread),
         Quat::from_axis_angle(axis, angle),
         scale,
@@ -120,7 +120,7 @@ pub(crate) fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
     if with_plane {
         instances.push(Instance::new(
             InstanceGeometry::Shape(Shape::Plane),
-            &Transform::from_translation(Vec3::new(0.0, -7.0, 0.0)),
+            &Transform::from_translation(glam::DVec3::new(0.0, -7.0, 0.0)),
             0,
         ));
     }

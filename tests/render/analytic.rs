@@ -184,8 +184,8 @@ material = { color = 0.0, emission = [0, 0, 1] }
     assert!(counters.rays.refraction > 0);
     let cam = CameraRays::new(
         &Camera {
-            look_from: Vec3::new(0.0, 0.0, 10.0),
-            look_at: Vec3::ZERO,
+            look_from: glam::DVec3::new(0.0, 0.0, 10.0),
+            look_at: glam::DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 20.0,
             name: None,
@@ -254,8 +254,8 @@ illuminance = 3.0
     let (film, _) = render_file(&path, w, h);
     let cam = CameraRays::new(
         &Camera {
-            look_from: Vec3::new(0.0, 6.0, 6.0),
-            look_at: Vec3::ZERO,
+            look_from: glam::DVec3::new(0.0, 6.0, 6.0),
+            look_at: glam::DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 45.0,
             name: None,
@@ -371,8 +371,8 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
     ];
     let cam = CameraRays::new(
         &Camera {
-            look_from: Vec3::new(0.0, 3.2, 10.0),
-            look_at: Vec3::new(0.0, 0.8, 0.0),
+            look_from: glam::DVec3::new(0.0, 3.2, 10.0),
+            look_at: glam::DVec3::new(0.0, 0.8, 0.0),
             up: Vec3::Y,
             vfov_degrees: 12.0,
             name: None,

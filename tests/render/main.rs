@@ -20,6 +20,7 @@
 mod common;
 
 mod analytic;
+mod large_worlds;
 mod path;
 mod robustness;
 mod scene_updates;

@@ -40,14 +40,14 @@ fn random_transform(rng: &mut Rng) -> Transform {
     let roll = rng.below(40);
     if roll == 0 {
         // Far beyond the BVH's coordinate limit: tested one by one.
-        return Transform::from_translation(Vec3::new(2e15, 0.0, 0.0));
+        return Transform::from_translation(glam::DVec3::new(2e15, 0.0, 0.0));
     }
     if roll == 1 {
         // Invalid: the frame must fail until it is fixed.
-        return Transform(Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)));
+        return Transform::from(Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)));
     }
     let axis = rng.vec(-1.0, 1.0).normalize_or(Vec3::Y);
-    Transform::from_trs(
+    Transform::from_trs_f32(
         rng.vec(-10.0, 10.0),
         Quat::from_axis_angle(axis, rng.range(0.0, 6.3)),
         Vec3::splat(rng.range(0.3, 2.0)),
@@ -102,7 +102,7 @@ fn new_world(spp: u32) -> (World, Schedule) {
         ..Default::default()
     }));
     world.spawn(Camera {
-        look_from: Vec3::new(0.0, 3.0, 25.0),
+        look_from: glam::DVec3::new(0.0, 3.0, 25.0),
         ..Default::default()
     });
     (world, schedule)
@@ -147,7 +147,12 @@ fn same_hit(
 }
 
 fn compare_with_scratch(world: &mut World, rng: &mut Rng, step: usize) {
-    let scratch = scene_from_scratch(world, Color::ZERO, BuildQuality::Medium);
+    let scratch = scene_from_scratch(
+        world,
+        world.resource::<Frame>().update.origin,
+        Color::ZERO,
+        BuildQuality::Medium,
+    );
     let frame_error = world.resource::<Frame>().error.clone();
     let (scratch, entities) = match scratch {
         Ok(s) => {
@@ -230,7 +235,7 @@ fn random_sequence(seed: u64, policy: TlasPolicy, steps: usize) {
         .collect();
     let light = world
         .spawn((
-            Transform::from_translation(Vec3::new(0.0, 8.0, 0.0)),
+            Transform::from_translation(glam::DVec3::new(0.0, 8.0, 0.0)),
             Light::Point {
                 intensity: Color::splat(100.0),
             },
@@ -277,7 +282,8 @@ fn random_sequence(seed: u64, policy: TlasPolicy, steps: usize) {
                 }
                 _ => {
                     let p = rng.vec(-8.0, 8.0);
-                    *world.get_mut::<Transform>(light).unwrap() = Transform::from_translation(p);
+                    *world.get_mut::<Transform>(light).unwrap() =
+                        Transform::from_translation(p.as_dvec3());
                 }
             }
         }
@@ -330,7 +336,13 @@ fn random_updates_match_scratch_with_reinsertion_and_no_rebuilds() {
 
 /// Renders `world`'s scene once, from scratch, with `spp` samples.
 fn reference_film(world: &mut World, spp: u32) -> prism::image::film::Film {
-    let (scene, _) = scene_from_scratch(world, Color::ZERO, BuildQuality::Medium).unwrap();
+    let (scene, _) = scene_from_scratch(
+        world,
+        world.resource::<Frame>().update.origin,
+        Color::ZERO,
+        BuildQuality::Medium,
+    )
+    .unwrap();
     let mut settings = world.resource::<RenderConfig>().settings.clone();
     settings.spp = spp;
     let mut q = world.query::<&Camera>();
@@ -359,17 +371,17 @@ fn progressive_world(spp: u32, transport: Transport) -> (World, Schedule, Entity
         .collect();
     for o in &objects {
         // Keep every transform valid and bounded.
-        let t = Transform::from_translation(rng.vec(-6.0, 6.0));
+        let t = Transform::from_translation(rng.vec(-6.0, 6.0).as_dvec3());
         *world.get_mut::<Transform>(*o).unwrap() = t;
     }
     world.spawn((
-        Transform::from_translation(Vec3::new(2.0, 9.0, 6.0)),
+        Transform::from_translation(glam::DVec3::new(2.0, 9.0, 6.0)),
         Light::Point {
             intensity: Color::splat(300.0),
         },
     ));
     world.spawn(Camera {
-        look_from: Vec3::new(0.0, 4.0, 22.0),
+        look_from: glam::DVec3::new(0.0, 4.0, 22.0),
         ..Default::default()
     });
     (world, schedule, objects[0])
@@ -478,7 +490,7 @@ fn invalid_transforms_fail_the_frame_until_fixed() {
     let (mut world, mut schedule) = new_world(1);
     let e = world
         .spawn((
-            Transform(Affine3A::from_scale(Vec3::new(f32::NAN, 1.0, 1.0))),
+            Transform::from(Affine3A::from_scale(Vec3::new(f32::NAN, 1.0, 1.0))),
             Shape::Sphere { radius: 1.0 },
         ))
         .id();
@@ -535,7 +547,7 @@ fn area_lights_follow_moves_and_material_changes() {
     };
     let light = world
         .spawn((
-            Transform::from_translation(Vec3::new(0.0, 2.0, 0.0)),
+            Transform::from_translation(glam::DVec3::new(0.0, 2.0, 0.0)),
             // A polygon: its area-light entries are stored in world space,
             // so a stale table would light from the old place.
             Shape::Polygon {
@@ -551,8 +563,8 @@ fn area_lights_follow_moves_and_material_changes() {
         ))
         .id();
     world.spawn(Camera {
-        look_from: Vec3::new(0.0, 1.0, 4.0),
-        look_at: Vec3::ZERO,
+        look_from: glam::DVec3::new(0.0, 1.0, 4.0),
+        look_at: glam::DVec3::ZERO,
         ..Default::default()
     });
     let check = |world: &mut World, schedule: &mut Schedule, what: &str| {
@@ -560,7 +572,13 @@ fn area_lights_follow_moves_and_material_changes() {
             world.resource_mut::<RenderConfig>().integrator = kind;
             run_frame(world, schedule);
             let film = world.resource::<Frame>().film.clone().unwrap();
-            let (scene, _) = scene_from_scratch(world, Color::ZERO, BuildQuality::Medium).unwrap();
+            let (scene, _) = scene_from_scratch(
+                world,
+                world.resource::<Frame>().update.origin,
+                Color::ZERO,
+                BuildQuality::Medium,
+            )
+            .unwrap();
             assert!(!scene.emitters().is_empty() || what == "dark");
             let mut q = world.query::<&Camera>();
             let camera = q.single(world).unwrap().clone();
@@ -577,7 +595,7 @@ fn area_lights_follow_moves_and_material_changes() {
         }
     };
     check(&mut world, &mut schedule, "first frame");
-    world.get_mut::<Transform>(light).unwrap().0.translation = Vec3A::new(1.0, 1.5, -0.5);
+    world.get_mut::<Transform>(light).unwrap().0.translation = glam::DVec3::new(1.0, 1.5, -0.5);
     check(&mut world, &mut schedule, "moved");
     world.entity_mut(light).insert(glow(0.0));
     check(&mut world, &mut schedule, "dark");

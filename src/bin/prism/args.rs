@@ -82,6 +82,29 @@ pub struct PathFlags {
     /// [default: the scene's, else 3].
     #[arg(long, value_name = "DEPTH")]
     pub rr_depth: Option<u32>,
+    /// Random numbers: Owen-scrambled Sobol points, stratified per pixel,
+    /// or independent hashed numbers [default: the scene's, else sobol].
+    #[arg(long, value_enum)]
+    pub sampler: Option<SamplerArg>,
+}
+
+impl PathFlags {
+    /// The sampler chosen, if one was.
+    pub fn sampler(&self) -> Option<prism::core::rng::SamplerKind> {
+        self.sampler.map(|s| match s {
+            SamplerArg::Sobol => prism::core::rng::SamplerKind::Sobol,
+            SamplerArg::Hash => prism::core::rng::SamplerKind::Hash,
+        })
+    }
+}
+
+/// `--sampler`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SamplerArg {
+    /// Owen-scrambled Sobol (Burley 2020), padded in sets of four.
+    Sobol,
+    /// Independent hashed numbers.
+    Hash,
 }
 
 /// `--threads` (render, bench, tradeoff).

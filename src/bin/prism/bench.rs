@@ -363,7 +363,7 @@ fn trace_streams(scene: &RenderScene, rays: &[Ray]) -> usize {
 /// Closest-hit throughput of camera rays and of incoherent secondary rays
 /// leaving the camera rays' hits in cosine-distributed directions.
 fn throughput(scene: &RenderScene, camera: &Camera, s: &RenderSettings, runs: usize) -> Throughput {
-    let cam = CameraRays::new(camera, s.width, s.height);
+    let cam = CameraRays::relative_to(camera, scene.origin(), s.width, s.height);
     let camera_rays: Vec<Ray> = (0..s.height)
         .flat_map(|y| (0..s.width).map(move |x| (x, y)))
         .map(|(x, y)| cam.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))

@@ -308,11 +308,10 @@ pub fn run(args: RaysArgs) -> Result<()> {
         Some(IsaArg::Portable) => {
             simd::force(simd::Isa::Portable);
         }
-        Some(IsaArg::Avx2) => {
-            if !simd::force(simd::Isa::Avx2) {
-                return Err(Error::Invalid("this CPU has no AVX2 and FMA".into()));
-            }
+        Some(IsaArg::Avx2) if !simd::force(simd::Isa::Avx2) => {
+            return Err(Error::Invalid("this CPU has no AVX2 and FMA".into()));
         }
+        Some(IsaArg::Avx2) => {}
         None => {}
     }
     let threads: Vec<usize> = if args.threads.is_empty() {

@@ -19,6 +19,15 @@ use crate::args::{
 };
 use crate::stats::{RenderStats, WavefrontStatsJson};
 
+/// `--render-origin`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum RenderOriginArg {
+    /// At the camera.
+    Camera,
+    /// At the world origin.
+    World,
+}
+
 /// Options of `prism render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -76,6 +85,12 @@ pub struct RenderArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
+    /// Where the single-precision frame the kernels work in is centred:
+    /// at the camera (precision follows the distance to the camera,
+    /// whatever the distance to the world origin), or at the world origin
+    /// (precision falls with the distance to it; for comparison).
+    #[arg(long, value_enum, default_value_t = RenderOriginArg::Camera)]
+    render_origin: RenderOriginArg,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -131,6 +146,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         seed: args.seed.seed,
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
+        sampler: args.path.sampler(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
@@ -185,6 +201,9 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     )?;
     let batch_paths = args.batch_paths.get()?;
     renderer.insert_resource(BatchSize(batch_paths));
+    if args.render_origin == RenderOriginArg::World {
+        renderer.insert_resource(systems::RenderOrigin::Fixed(glam::DVec3::ZERO));
+    }
     renderer.run();
     if let Some(b) = &bar {
         b.finish_and_clear();

@@ -1233,9 +1233,14 @@ fn random_rays_match_f64_reference_planar() {
 fn instance() -> (Quat, Vec3, Vec3, InstanceTransform) {
     let rotation = Quat::from_axis_angle(Vec3::new(1.0, 2.0, -0.5).normalize(), 0.9);
     let (translation, scale) = (Vec3::new(1.0, -2.0, 0.5), Vec3::new(2.0, 0.5, 1.25));
-    let t = Transform::from_trs(translation, rotation, scale);
+    let t = Transform::from_trs_f32(translation, rotation, scale);
     assert!(t.is_valid());
-    (rotation, translation, scale, InstanceTransform::new(&t))
+    (
+        rotation,
+        translation,
+        scale,
+        InstanceTransform::new(t.relative_to(glam::DVec3::ZERO)),
+    )
 }
 
 fn to_object(it: &InstanceTransform, o: Vec3A, dir: Vec3A) -> Ray {

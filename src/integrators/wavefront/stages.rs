@@ -46,7 +46,7 @@ pub fn generate_camera_rays(
         let pixel = p / spp;
         let sample = (p % spp) as u32;
         let (x, y) = ((pixel % width) as u32, (pixel / width) as u32);
-        let mut sampler = Sampler::new(settings.seed, pixel as u32, sample);
+        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel as u32, sample);
         let ray = camera.ray(film_sample(x, y, settings.spp, &mut sampler));
         out.push(RayItem {
             ray,
@@ -230,7 +230,12 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
             return;
         }
         let p = first + h.path as u64;
-        let mut sampler = Sampler::new(settings.seed, (p / spp) as u32, (p % spp) as u32);
+        let mut sampler = Sampler::with_kind(
+            settings.sampler,
+            settings.seed,
+            (p / spp) as u32,
+            (p % spp) as u32,
+        );
         let lobes = LobeChoice::new(it);
         if NEE {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {

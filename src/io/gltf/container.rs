@@ -18,6 +18,7 @@ pub(super) fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
             gltf::Error::Binary(e) => format!("invalid GLB container: {e}"),
             e => format!("cannot parse glTF: {e}"),
         })?;
+    let node_transforms = raw_node_transforms(bytes, is_glb);
     let json = document.into_json();
     precheck_json(&json)?;
     let document = gltf::Document::from_json(json).map_err(|e| match e {
@@ -46,7 +47,68 @@ pub(super) fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
         document,
         buffers,
         base,
+        node_transforms,
     })
+}
+
+/// The JSON text of a `.gltf` file or of a GLB's first chunk.
+fn json_bytes(bytes: &[u8], is_glb: bool) -> Option<&[u8]> {
+    if !is_glb {
+        return Some(bytes);
+    }
+    let word = |i: usize| {
+        bytes
+            .get(i..i + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let (len, kind) = (word(12)? as usize, word(16)?);
+    // "JSON" in little-endian byte order.
+    (kind == 0x4E4F_534A).then_some(())?;
+    bytes.get(20..20usize.checked_add(len)?)
+}
+
+/// Every node's local transform read from the JSON in double precision.
+/// The `gltf` crate has already parsed and validated the same text, so a
+/// failure here only means falling back to its f32 values.
+fn raw_node_transforms(bytes: &[u8], is_glb: bool) -> Vec<Option<glam::DAffine3>> {
+    #[derive(serde::Deserialize)]
+    struct RawRoot {
+        #[serde(default)]
+        nodes: Vec<RawNode>,
+    }
+    #[derive(serde::Deserialize)]
+    struct RawNode {
+        matrix: Option<[f64; 16]>,
+        translation: Option<[f64; 3]>,
+        rotation: Option<[f64; 4]>,
+        scale: Option<[f64; 3]>,
+    }
+    let Some(root) =
+        json_bytes(bytes, is_glb).and_then(|j| serde_json::from_slice::<RawRoot>(j).ok())
+    else {
+        return Vec::new();
+    };
+    root.nodes
+        .into_iter()
+        .map(|n| {
+            let local = match n.matrix {
+                Some(m) => glam::DAffine3::from_mat4(glam::DMat4::from_cols_array(&m)),
+                None => {
+                    let q = glam::DQuat::from_array(n.rotation.unwrap_or([0.0, 0.0, 0.0, 1.0]));
+                    let length = q.length();
+                    if !(length.is_finite() && length > 0.0) {
+                        return None;
+                    }
+                    glam::DAffine3::from_scale_rotation_translation(
+                        glam::DVec3::from(n.scale.unwrap_or([1.0; 3])),
+                        q / length,
+                        glam::DVec3::from(n.translation.unwrap_or([0.0; 3])),
+                    )
+                }
+            };
+            Some(local)
+        })
+        .collect()
 }
 
 /// Checks the 12-byte GLB header before the `gltf` crate reads it (it

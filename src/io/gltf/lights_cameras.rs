@@ -1,7 +1,7 @@
 //! `KHR_lights_punctual` lights and cameras, placed by their node's world
 //! transform.
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{DAffine3, DVec3, Vec3};
 
 use crate::geometry::transform::Transform;
 use crate::io::desc::LightDesc;
@@ -55,7 +55,7 @@ pub(super) fn convert_camera(
     st: &mut State,
     camera: &gltf::Camera,
     node: &str,
-    world: Affine3A,
+    world: DAffine3,
 ) -> Result<Option<Camera>, String> {
     let label = match camera.name() {
         Some(name) => format!("camera {} ('{name}') at {node}", camera.index()),
@@ -73,9 +73,13 @@ pub(super) fn convert_camera(
     if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
         return Err(format!("{label}: yfov {yfov} is not in (0, pi) radians"));
     }
-    let position = Vec3::from(world.translation);
-    let forward = Vec3::from(world.matrix3.mul_vec3a(Vec3A::NEG_Z)).normalize_or_zero();
-    let up = Vec3::from(world.matrix3.mul_vec3a(Vec3A::Y)).normalize_or_zero();
+    let position = world.translation;
+    let forward = world.matrix3.mul_vec3(DVec3::NEG_Z).normalize_or_zero();
+    let up = world
+        .matrix3
+        .mul_vec3(DVec3::Y)
+        .normalize_or_zero()
+        .as_vec3();
     let result = Camera {
         look_from: position,
         look_at: position + forward,

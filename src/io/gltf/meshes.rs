@@ -3,6 +3,8 @@
 
 use std::sync::Arc;
 
+use glam::{DVec3, Vec3};
+
 use gltf::mesh::{Mode, Semantic};
 
 use crate::geometry::mesh::{MAX_COORDINATE, Mesh, MeshData, NormalMode};
@@ -10,21 +12,65 @@ use crate::geometry::mesh::{MAX_COORDINATE, Mesh, MeshData, NormalMode};
 use super::accessors::{read_indices, read_vec2, read_vec3};
 use super::{Ctx, State};
 
-/// The shared mesh of one primitive, or `None` when it has nothing to
-/// render (points, lines, no triangles).
+/// The shared mesh of one primitive and the offset (object space, f64)
+/// its vertices were moved by, or `None` when it has nothing to render
+/// (points, lines, no triangles). Place it with the node's transform times
+/// a translation by the offset.
 pub(super) fn primitive_mesh(
     ctx: &Ctx,
     st: &mut State,
     mesh: &gltf::Mesh,
     primitive: &gltf::Primitive,
-) -> Result<Option<Arc<Mesh>>, String> {
+) -> Result<Option<(Arc<Mesh>, DVec3)>, String> {
     let key = (mesh.index(), primitive.index());
     if let Some(cached) = st.meshes.get(&key) {
         return Ok(cached.clone());
     }
-    let built = build_primitive(ctx, st, mesh, primitive)?.map(Arc::new);
+    let built = build_primitive(ctx, st, mesh, primitive)?.map(|(m, o)| (Arc::new(m), o));
     st.meshes.insert(key, built.clone());
     Ok(built)
+}
+
+/// Moves vertices stored far from their own origin (POSITION values of
+/// ~1e7 for a mesh a few units across) next to it, and returns the offset
+/// that puts them back.
+///
+/// Such vertices keep only the precision they were stored with (an f32 at
+/// 1e7 is a multiple of 1), but traversal and intersection in object
+/// space would also round every ray to that grid. Per axis, the offset is
+/// the box centre rounded to a multiple of the coarsest ulp among the
+/// axis's values, so every `v - offset` is exact in f32: the moved mesh is
+/// the same set of points, and the instance transform (f64) adds the
+/// offset back. Meshes whose box is not far from their origin compared
+/// with their size are left alone (offset zero).
+pub(super) fn recentre(positions: &mut [Vec3]) -> DVec3 {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for p in positions.iter().filter(|p| p.is_finite()) {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return DVec3::ZERO;
+    }
+    let extent = (hi - lo).max_element().max(f32::MIN_POSITIVE) as f64;
+    let mut offset = DVec3::ZERO;
+    for axis in 0..3 {
+        let centre = 0.5 * (lo[axis] as f64 + hi[axis] as f64);
+        if centre.abs() <= 4.0 * extent {
+            continue;
+        }
+        let largest = lo[axis].abs().max(hi[axis].abs());
+        let ulp = (f32::from_bits(largest.to_bits() + 1) - largest) as f64;
+        offset[axis] = (centre / ulp).round() * ulp;
+    }
+    if offset != DVec3::ZERO {
+        let o = offset.as_vec3();
+        debug_assert_eq!(o.as_dvec3(), offset);
+        for p in positions.iter_mut() {
+            *p -= o;
+        }
+    }
+    offset
 }
 
 pub(super) fn mesh_name(mesh: &gltf::Mesh) -> String {
@@ -39,7 +85,7 @@ fn build_primitive(
     st: &mut State,
     mesh: &gltf::Mesh,
     primitive: &gltf::Primitive,
-) -> Result<Option<Mesh>, String> {
+) -> Result<Option<(Mesh, DVec3)>, String> {
     let name = mesh_name(mesh);
     let pi = primitive.index();
     let fail = |e: String| format!("mesh '{name}' primitive {pi}: {e}");
@@ -51,7 +97,7 @@ fn build_primitive(
         st.skipped_primitives += 1;
         return Ok(None);
     }
-    let positions = match primitive.get(&Semantic::Positions) {
+    let mut positions = match primitive.get(&Semantic::Positions) {
         Some(a) => read_vec3(ctx, &a).map_err(|e| fail(format!("POSITION: {e}")))?,
         None => return Err(fail("no POSITION attribute".into())),
     };
@@ -97,6 +143,7 @@ fn build_primitive(
     } else {
         name.clone()
     };
+    let offset = recentre(&mut positions);
     let data = MeshData {
         positions,
         normals,
@@ -110,7 +157,7 @@ fn build_primitive(
         st.quality.quality,
         st.quality.accel.unwrap_or_default(),
     )
-        .map(Some)
+    .map(|m| Some((m, offset)))
         .map_err(fail)
 }
 

@@ -145,13 +145,23 @@ struct Ctx {
     document: gltf::Document,
     buffers: Vec<Vec<u8>>,
     base: PathBuf,
+    /// Each node's local transform as written in the file, in f64 (the
+    /// `gltf` crate reads them as f32, which loses a translation of 1e5 +
+    /// 0.3 to within 0.004); `None` when the JSON could not be re-read.
+    node_transforms: Vec<Option<glam::DAffine3>>,
 }
+
+/// A primitive's shared mesh and the object-space offset its vertices
+/// were moved by.
+type PlacedMesh = (Arc<Mesh>, glam::DVec3);
 
 /// Caches and warnings accumulated while building the scene.
 #[derive(Default)]
 struct State {
     quality: BuildOptions,
-    meshes: HashMap<(usize, usize), Option<Arc<Mesh>>>,
+    /// Each primitive's mesh and the offset its vertices were moved by
+    /// (see `meshes::recentre`).
+    meshes: HashMap<(usize, usize), Option<PlacedMesh>>,
     materials: HashMap<Option<usize>, Material>,
     decoded: HashMap<usize, image::DynamicImage>,
     textures: HashMap<(usize, bool), Arc<ImageTexture>>,

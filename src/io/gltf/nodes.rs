@@ -2,7 +2,7 @@
 //! depth first with composed world transforms, and each node's meshes,
 //! light and camera are added to the scene.
 
-use glam::{Affine3A, Mat4, Quat, Vec3, Vec3A};
+use glam::{Affine3A, DAffine3, Mat4, Quat, Vec3, Vec3A};
 
 use crate::geometry::mesh::{BuildOptions, MAX_COORDINATE, Mesh};
 use crate::geometry::transform::Transform;
@@ -26,9 +26,25 @@ fn node_label(node: &gltf::Node) -> String {
     }
 }
 
-/// The node's local transform. TRS quaternions are normalised; the last
-/// row of a matrix is ignored (glTF requires it to be `0 0 0 1`).
-fn local_transform(node: &gltf::Node, label: &str) -> Result<Affine3A, String> {
+/// The node's local transform, in f64 as written in the file. TRS
+/// quaternions are normalised; the last row of a matrix is ignored (glTF
+/// requires it to be `0 0 0 1`).
+fn local_transform(ctx: &Ctx, node: &gltf::Node, label: &str) -> Result<DAffine3, String> {
+    let single = local_transform_f32(node, label)?;
+    let local = match ctx.node_transforms.get(node.index()) {
+        Some(Some(exact)) => *exact,
+        _ => single.as_daffine3(),
+    };
+    if !local.is_finite() {
+        return Err(format!("{label}: transform is not finite"));
+    }
+    Ok(local)
+}
+
+/// The node's local transform as the `gltf` crate reads it (f32): the
+/// checks and error messages, and the fallback when the JSON cannot be
+/// re-read in f64.
+fn local_transform_f32(node: &gltf::Node, label: &str) -> Result<Affine3A, String> {
     let local = match node.transform() {
         gltf::scene::Transform::Matrix { matrix } => {
             Affine3A::from_mat4(Mat4::from_cols_array_2d(&matrix))
@@ -136,10 +152,10 @@ pub(super) fn build_scene(
     };
 
     let mut scene = SceneDesc::default();
-    let mut stack: Vec<(usize, Affine3A, usize)> = roots
+    let mut stack: Vec<(usize, DAffine3, usize)> = roots
         .iter()
         .rev()
-        .map(|&i| (i, Affine3A::IDENTITY, 0))
+        .map(|&i| (i, DAffine3::IDENTITY, 0))
         .collect();
     let mut visits = 0usize;
     while let Some((index, parent, depth)) = stack.pop() {
@@ -158,7 +174,7 @@ pub(super) fn build_scene(
                 "the node hierarchy expands to more than {MAX_NODE_VISITS} node instances"
             ));
         }
-        let local = local_transform(node, &label)?;
+        let local = local_transform(ctx, node, &label)?;
         let world = parent * local;
         if !world.is_finite() {
             return Err(format!("{label}: world transform is not finite"));
@@ -179,15 +195,17 @@ fn visit_node(
     scene: &mut SceneDesc,
     node: &gltf::Node,
     label: &str,
-    world: Affine3A,
+    world: DAffine3,
 ) -> Result<(), String> {
     let transform = Transform(world);
     if let Some(mesh) = node.mesh() {
         if transform.is_valid() {
             for primitive in mesh.primitives() {
-                let Some(geometry) = primitive_mesh(ctx, st, &mesh, &primitive)? else {
+                let Some((geometry, offset)) = primitive_mesh(ctx, st, &mesh, &primitive)? else {
                     continue;
                 };
+                let world = world * DAffine3::from_translation(offset);
+                let transform = Transform(world);
                 check_world_bounds(&geometry, &world, label)?;
                 let material = material(ctx, st, &primitive.material())?;
                 scene.objects.push(ObjectDesc {
@@ -216,7 +234,7 @@ fn visit_node(
 
 /// Fails if a mesh placed by `world` reaches farther than
 /// [`MAX_COORDINATE`] from the origin.
-fn check_world_bounds(mesh: &Mesh, world: &Affine3A, node: &str) -> Result<(), String> {
+fn check_world_bounds(mesh: &Mesh, world: &DAffine3, node: &str) -> Result<(), String> {
     let Some((lo, hi)) = mesh.bounds() else {
         return Ok(());
     };
@@ -226,8 +244,8 @@ fn check_world_bounds(mesh: &Mesh, world: &Affine3A, node: &str) -> Result<(), S
             hi,
             lo,
         );
-        let p = world.transform_point3a(corner);
-        if !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE) {
+        let p = world.transform_point3(corner.as_dvec3());
+        if !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE as f64) {
             return Err(format!(
                 "{node}: mesh '{}' reaches farther than {MAX_COORDINATE:e} from the origin \
                  in world space",

@@ -15,6 +15,7 @@ use clap::ValueEnum;
 use indicatif::ProgressBar;
 
 use prism::core::error::{Error, Result};
+use prism::core::rng::SamplerKind;
 use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::mesh::BuildQuality;
 use prism::image::film::Film;
@@ -126,11 +127,13 @@ pub enum Knob {
     Bvh,
     /// Light transport: Whitted against path tracing.
     Transport,
+    /// Random numbers: Owen-scrambled Sobol against independent hashes.
+    Sampler,
 }
 
 impl Knob {
     /// Every knob, in sweep order.
-    pub const ALL: [Knob; 7] = [
+    pub const ALL: [Knob; 8] = [
         Knob::Spp,
         Knob::MaxDepth,
         Knob::MinContribution,
@@ -138,6 +141,7 @@ impl Knob {
         Knob::RussianRoulette,
         Knob::Bvh,
         Knob::Transport,
+        Knob::Sampler,
     ];
 
     /// Name as written in the CSV and on the command line.
@@ -150,6 +154,7 @@ impl Knob {
             Knob::RussianRoulette => "russian-roulette",
             Knob::Bvh => "bvh",
             Knob::Transport => "transport",
+            Knob::Sampler => "sampler",
         }
     }
 }
@@ -172,6 +177,7 @@ const BVH_VALUES: [BuildQuality; 6] = [
     BuildQuality::VerySlow,
 ];
 const TRANSPORT_VALUES: [Transport; 2] = [Transport::Whitted, Transport::Path];
+const SAMPLER_VALUES: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Hash];
 
 /// The name of a BVH preset, as on `prism render --bvh-quality`.
 pub fn bvh_name(q: BuildQuality) -> &'static str {
@@ -229,6 +235,10 @@ impl Knob {
                 .iter()
                 .map(|v| v.name().to_string())
                 .collect(),
+            Knob::Sampler => SAMPLER_VALUES
+                .iter()
+                .map(|v| v.name().to_string())
+                .collect(),
         }
     }
 
@@ -243,6 +253,7 @@ impl Knob {
             Knob::RussianRoulette => s.rr_start_depth = RR_VALUES[i],
             Knob::Bvh => c.bvh = BVH_VALUES[i],
             Knob::Transport => s.transport = TRANSPORT_VALUES[i],
+            Knob::Sampler => s.sampler = SAMPLER_VALUES[i],
         }
     }
 
@@ -257,6 +268,7 @@ impl Knob {
             Knob::RussianRoulette => rr_name(s.rr_start_depth),
             Knob::Bvh => bvh_name(c.bvh).to_string(),
             Knob::Transport => s.transport.name().to_string(),
+            Knob::Sampler => s.sampler.name().to_string(),
         }
     }
 
@@ -412,6 +424,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         transport: Some(Transport::Path),
         light_samples: args.path.light_samples,
         rr_start_depth: args.path.rr_depth.map(Some),
+        sampler: args.path.sampler(),
         ..args.frame.desc()
     }
     .resolve(&base_desc.settings);
@@ -626,6 +639,7 @@ mod tests {
         assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
         assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
         assert_eq!(count("transport"), 1);
+        assert_eq!(count("sampler"), 1);
         for x in &p[1..] {
             let mut c = x.config.clone();
             // Undo the one knob: the rest must be the base.
@@ -637,6 +651,7 @@ mod tests {
                 "russian-roulette" => c.settings.rr_start_depth = base.settings.rr_start_depth,
                 "bvh" => c.bvh = base.bvh,
                 "transport" => c.settings.transport = base.settings.transport,
+                "sampler" => c.settings.sampler = base.settings.sampler,
                 k => panic!("unexpected knob {k}"),
             }
             assert_eq!(c, base, "{} {}", x.knob, x.value);

@@ -69,7 +69,7 @@ pub fn pareto_front(rows: &[Row]) -> Vec<usize> {
 }
 
 fn knob_colour(knob: &str) -> RGBColor {
-    const PALETTE: [RGBColor; 7] = [
+    const PALETTE: [RGBColor; 8] = [
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),
         RGBColor(44, 160, 44),
@@ -77,6 +77,7 @@ fn knob_colour(knob: &str) -> RGBColor {
         RGBColor(148, 103, 189),
         RGBColor(140, 86, 75),
         RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
     ];
     Knob::ALL
         .iter()
