@@ -335,6 +335,8 @@ intensity = 40
     std::fs::write(&bad_scene, "[settings]\naccel = \"octree\"\n").unwrap();
     let out = dir.path().join("bad2.png");
     assert_clean_failure(&render(&bad_scene, &out, &[]), &out, &["accel"]);
+}
+
 /// `--render-origin`: a scene translated by 1e7 renders (EXR, bit for bit)
 /// as at the origin by default, and visibly worse with the kernels centred
 /// on the world origin.

@@ -196,7 +196,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
 }
 
 const HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel";
 
 fn tradeoff(out: &Path, extra: &[&str]) -> Output {
     prism()
@@ -265,12 +265,13 @@ fn tradeoff_writes_the_csv_and_plots() {
         "bvh",
         "transport",
         "sampler",
+        "accel",
     ] {
         assert!(knobs.contains(&k), "no {k} rows");
     }
     for l in &lines[1..] {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 15, "{l}");
+        assert_eq!(f.len(), 16, "{l}");
         let spp: u64 = f[3].parse().unwrap();
         let seconds: f64 = f[10].parse().unwrap();
         let rays: u64 = f[11].parse().unwrap();
