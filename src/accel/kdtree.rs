@@ -139,7 +139,11 @@ fn split_cost(lo: DVec3, hi: DVec3, axis: usize, p: f64, nl: usize, nr: usize) -
     let mut rlo = lo;
     rlo[axis] = p;
     let (pl, pr) = (area(lo, lhi) / total, area(rlo, hi) / total);
-    let lambda = if nl == 0 || nr == 0 { EMPTY_FACTOR } else { 1.0 };
+    let lambda = if nl == 0 || nr == 0 {
+        EMPTY_FACTOR
+    } else {
+        1.0
+    };
     lambda * (TRAVERSAL_COST + INTERSECTION_COST * (pl * nl as f64 + pr * nr as f64))
 }
 
@@ -168,9 +172,7 @@ type Split = (f64, usize, f64);
 fn better(a: Split, b: Option<Split>) -> bool {
     match b {
         None => true,
-        Some(b) => {
-            a.0 < b.0 || (a.0 == b.0 && (a.1 < b.1 || (a.1 == b.1 && a.2 < b.2)))
-        }
+        Some(b) => a.0 < b.0 || (a.0 == b.0 && (a.1 < b.1 || (a.1 == b.1 && a.2 < b.2))),
     }
 }
 
@@ -200,7 +202,14 @@ impl Builder<'_> {
     }
 
     /// Whether a node of `n` triangles should split at `best`.
-    fn worth(&self, lo: DVec3, hi: DVec3, n: usize, depth: u32, best: Option<Split>) -> Option<Split> {
+    fn worth(
+        &self,
+        lo: DVec3,
+        hi: DVec3,
+        n: usize,
+        depth: u32,
+        best: Option<Split>,
+    ) -> Option<Split> {
         if n == 0 || depth >= self.max_depth || area(lo, hi) <= 0.0 {
             return None;
         }
@@ -210,12 +219,20 @@ impl Builder<'_> {
     /// Sides of the items for a split at `p` on `axis`, and the children's
     /// items: one-sided triangles keep their bounds, the others are
     /// clipped again to each child (and dropped where nothing is left).
-    fn partition(&mut self, items: &[Item], lo: DVec3, hi: DVec3, axis: usize, p: f64) -> (Vec<Item>, Vec<Item>, Vec<Item>, Vec<Item>) {
+    fn partition(
+        &mut self,
+        items: &[Item],
+        lo: DVec3,
+        hi: DVec3,
+        axis: usize,
+        p: f64,
+    ) -> (Vec<Item>, Vec<Item>, Vec<Item>, Vec<Item>) {
         let mut lhi = hi;
         lhi[axis] = p;
         let mut rlo = lo;
         rlo[axis] = p;
-        let (mut left, mut right, mut new_left, mut new_right) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut left, mut right, mut new_left, mut new_right) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for it in items {
             let planar = it.lo[axis] == p && it.hi[axis] == p;
             let l = it.lo[axis] < p || planar;
@@ -228,10 +245,18 @@ impl Builder<'_> {
                 _ => {
                     let t = &self.tris[it.tri as usize];
                     if let Some((a, b)) = clipped_bound(t, lo, lhi) {
-                        new_left.push(Item { tri: it.tri, lo: a, hi: b });
+                        new_left.push(Item {
+                            tri: it.tri,
+                            lo: a,
+                            hi: b,
+                        });
                     }
                     if let Some((a, b)) = clipped_bound(t, rlo, hi) {
-                        new_right.push(Item { tri: it.tri, lo: a, hi: b });
+                        new_right.push(Item {
+                            tri: it.tri,
+                            lo: a,
+                            hi: b,
+                        });
                     }
                 }
             }
@@ -241,7 +266,14 @@ impl Builder<'_> {
 
     /// The O(N log N) build of a node with `items` and their sorted
     /// `events` per axis.
-    fn build(&mut self, items: Vec<Item>, events: [Vec<Event>; 3], lo: DVec3, hi: DVec3, depth: u32) {
+    fn build(
+        &mut self,
+        items: Vec<Item>,
+        events: [Vec<Event>; 3],
+        lo: DVec3,
+        hi: DVec3,
+        depth: u32,
+    ) {
         let n = items.len();
         let mut best: Option<Split> = None;
         for (axis, ev) in events.iter().enumerate() {
@@ -297,7 +329,12 @@ impl Builder<'_> {
         let mut rlo = lo;
         rlo[axis] = p;
         let me = self.nodes.len();
-        self.nodes.push(KdNode { split: p, axis: axis as u8, index: 0, count: 0 });
+        self.nodes.push(KdNode {
+            split: p,
+            axis: axis as u8,
+            index: 0,
+            count: 0,
+        });
         self.build(litems, lev, lo, lhi, depth + 1);
         self.nodes[me].index = self.nodes.len() as u32;
         self.build(ritems, rev, rlo, hi, depth + 1);
@@ -308,14 +345,20 @@ impl Builder<'_> {
         let n = items.len();
         let mut best: Option<Split> = None;
         for axis in 0..3 {
-            let mut cands: Vec<f64> = items.iter().flat_map(|i| [i.lo[axis], i.hi[axis]]).collect();
+            let mut cands: Vec<f64> = items
+                .iter()
+                .flat_map(|i| [i.lo[axis], i.hi[axis]])
+                .collect();
             cands.sort_by(f64::total_cmp);
             cands.dedup();
             for &p in &cands {
                 if !(lo[axis] < p && p < hi[axis]) {
                     continue;
                 }
-                let planar = items.iter().filter(|i| i.lo[axis] == p && i.hi[axis] == p).count();
+                let planar = items
+                    .iter()
+                    .filter(|i| i.lo[axis] == p && i.hi[axis] == p)
+                    .count();
                 let nl = items.iter().filter(|i| i.lo[axis] < p).count() + planar;
                 let nr = items.iter().filter(|i| i.hi[axis] > p).count() + planar;
                 let c = (split_cost(lo, hi, axis, p, nl, nr), axis, p);
@@ -336,7 +379,12 @@ impl Builder<'_> {
         let mut rlo = lo;
         rlo[axis] = p;
         let me = self.nodes.len();
-        self.nodes.push(KdNode { split: p, axis: axis as u8, index: 0, count: 0 });
+        self.nodes.push(KdNode {
+            split: p,
+            axis: axis as u8,
+            index: 0,
+            count: 0,
+        });
         self.build_naive(left, lo, lhi, depth + 1);
         self.nodes[me].index = self.nodes.len() as u32;
         self.build_naive(right, rlo, hi, depth + 1);
@@ -348,10 +396,22 @@ fn events_of(items: &[Item], axis: usize) -> Vec<Event> {
     let mut ev = Vec::with_capacity(items.len() * 2);
     for it in items {
         if it.lo[axis] == it.hi[axis] {
-            ev.push(Event { pos: it.lo[axis], kind: PLANAR, tri: it.tri });
+            ev.push(Event {
+                pos: it.lo[axis],
+                kind: PLANAR,
+                tri: it.tri,
+            });
         } else {
-            ev.push(Event { pos: it.lo[axis], kind: START, tri: it.tri });
-            ev.push(Event { pos: it.hi[axis], kind: END, tri: it.tri });
+            ev.push(Event {
+                pos: it.lo[axis],
+                kind: START,
+                tri: it.tri,
+            });
+            ev.push(Event {
+                pos: it.hi[axis],
+                kind: END,
+                tri: it.tri,
+            });
         }
     }
     ev.sort_unstable_by(event_order);
@@ -393,7 +453,11 @@ impl KdTree {
                 let b = t[0].max(t[1]).max(t[2]);
                 lo = lo.min(a);
                 hi = hi.max(b);
-                Item { tri: i as u32, lo: a, hi: b }
+                Item {
+                    tri: i as u32,
+                    lo: a,
+                    hi: b,
+                }
             })
             .collect();
         for t in triangles {
@@ -462,7 +526,9 @@ impl KdTree {
 
     /// Bytes of the node and triangle arrays.
     pub fn bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<KdNode>() + self.prims.len() * 4 + std::mem::size_of::<Self>()
+        self.nodes.len() * std::mem::size_of::<KdNode>()
+            + self.prims.len() * 4
+            + std::mem::size_of::<Self>()
     }
 
     /// Calls `f(node, lo, hi, depth)` for every node with its box, parents
@@ -562,7 +628,11 @@ impl KdTree {
                         let r = o[a] >= p - pad;
                         n = match (l, r) {
                             (true, true) => {
-                                let (near, far) = if o[a] < p { (left, right) } else { (right, left) };
+                                let (near, far) = if o[a] < p {
+                                    (left, right)
+                                } else {
+                                    (right, left)
+                                };
                                 stack.push((far, ta, tb));
                                 near
                             }
@@ -611,7 +681,9 @@ mod tests {
     fn soup(n: usize, seed: u64, spread: f32, size: f32) -> Vec<[Vec3A; 3]> {
         let mut s = seed;
         let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (s >> 40) as f32 / (1u64 << 24) as f32
         };
         (0..n)
@@ -641,7 +713,9 @@ mod tests {
         let tris = soup(400, 3, 1.0, 0.8);
         let mut s = 5u64;
         let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
         let mut clipped = 0;
@@ -669,8 +743,14 @@ mod tests {
                 }
                 if let Some((lo, hi)) = got {
                     clipped += (inside_pts > 0) as u32;
-                    assert!(lo.cmpge(a).all() && hi.cmple(b).all(), "outside the node box");
-                    assert!(lo.cmpge(tlo).all() && hi.cmple(thi).all(), "outside the triangle's box");
+                    assert!(
+                        lo.cmpge(a).all() && hi.cmple(b).all(),
+                        "outside the node box"
+                    );
+                    assert!(
+                        lo.cmpge(tlo).all() && hi.cmple(thi).all(),
+                        "outside the triangle's box"
+                    );
                     assert!(lo.cmple(hi).all());
                 }
             }
@@ -689,7 +769,11 @@ mod tests {
             assert_eq!(fast.nodes, naive.nodes, "seed {seed}, {n} triangles");
             assert_eq!(fast.prims, naive.prims);
             if n >= 60 {
-                assert!(fast.nodes.len() > 10, "{n} triangles gave {} nodes", fast.nodes.len());
+                assert!(
+                    fast.nodes.len() > 10,
+                    "{n} triangles gave {} nodes",
+                    fast.nodes.len()
+                );
             }
         }
     }

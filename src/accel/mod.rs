@@ -5,10 +5,10 @@
 //! Knows nothing of what the boxes contain.
 
 pub mod build;
+pub mod bvh8;
 pub mod grid;
 pub mod kdtree;
 pub mod mailbox;
-pub mod bvh8;
 pub mod node;
 pub mod packet;
 pub mod simd;

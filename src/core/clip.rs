@@ -93,7 +93,8 @@ pub fn cohen_sutherland(a: DVec2, b: DVec2, r: &Rect) -> Option<(DVec2, DVec2)> 
 
 /// Clamps coordinates within a few ulps outside `r` onto its edges.
 fn snap(p: DVec2, r: &Rect) -> DVec2 {
-    let tol = 8.0 * f64::EPSILON * (r.min.abs().max(r.max.abs()).max_element() + p.abs().max_element());
+    let tol =
+        8.0 * f64::EPSILON * (r.min.abs().max(r.max.abs()).max_element() + p.abs().max_element());
     let fix = |v: f64, lo: f64, hi: f64| {
         if v < lo && v > lo - tol {
             lo
@@ -350,21 +351,37 @@ mod tests {
         assert_eq!(outcode(DVec2::new(0.5, 0.5), &r), 0);
         assert_eq!(outcode(DVec2::new(-1.0, 2.0), &r), LEFT | TOP);
         assert_eq!(outcode(DVec2::new(2.0, -1.0), &r), RIGHT | BOTTOM);
-        assert_eq!(outcode(DVec2::new(1.0, 0.0), &r), 0, "the boundary is inside");
+        assert_eq!(
+            outcode(DVec2::new(1.0, 0.0), &r),
+            0,
+            "the boundary is inside"
+        );
     }
 
     #[test]
     fn box_clip_of_a_triangle_through_a_corner() {
         // The triangle (0,0,0) (2,0,0) (0,2,0) against the unit box: its
         // hypotenuse x + y = 2 passes through (1, 1), the whole square remains.
-        let tri = [DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), DVec3::new(0.0, 2.0, 0.0)];
+        let tri = [
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.0, 2.0, 0.0),
+        ];
         let out = clip_polygon_box(&tri, DVec3::ZERO, DVec3::ONE);
         let flat: Vec<DVec2> = out.iter().map(|p| p.truncate()).collect();
         assert!((polygon_area(&flat) - 1.0).abs() < 1e-15);
         // Shifted so the hypotenuse cuts the square: area 1 - 1/8.
-        let tri = [DVec3::ZERO, DVec3::new(1.5, 0.0, 0.0), DVec3::new(0.0, 1.5, 0.0)];
+        let tri = [
+            DVec3::ZERO,
+            DVec3::new(1.5, 0.0, 0.0),
+            DVec3::new(0.0, 1.5, 0.0),
+        ];
         let out = clip_polygon_box(&tri, DVec3::ZERO, DVec3::ONE);
         let flat: Vec<DVec2> = out.iter().map(|p| p.truncate()).collect();
-        assert!((polygon_area(&flat) - (1.125 - 0.25)).abs() < 1e-15, "{}", polygon_area(&flat));
+        assert!(
+            (polygon_area(&flat) - (1.125 - 0.25)).abs() < 1e-15,
+            "{}",
+            polygon_area(&flat)
+        );
     }
 }

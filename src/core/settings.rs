@@ -63,7 +63,9 @@ impl Transport {
 /// the same hits (the same watertight triangle test, the same closest-`t`
 /// rule, equal `t` going to the lower input triangle index); they differ
 /// in build time, memory and speed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Accel {
     /// Prism's 8-wide BVH (built by obvhs), the default.

@@ -375,7 +375,11 @@ impl Mesh {
     /// hit is known, so that an equal `t` is found and can win on index.
     #[inline(always)]
     fn reach(t_max: f32, best: &Option<MeshHit>) -> f32 {
-        if best.is_some() { t_max.next_up() } else { t_max }
+        if best.is_some() {
+            t_max.next_up()
+        } else {
+            t_max
+        }
     }
 
     /// Triangle `i` (stored order) if it replaces `best`.
@@ -527,7 +531,8 @@ impl Mesh {
         best.resize(stream.len(), None);
         if !matches!(self.structure, Structure::Bvh) {
             for (r, b) in best.iter_mut().enumerate() {
-                *b = self.intersect_kernel::<AVX>(&stream.rays[r], stream.t_min[r], stream.t_max[r]);
+                *b =
+                    self.intersect_kernel::<AVX>(&stream.rays[r], stream.t_min[r], stream.t_max[r]);
             }
             return;
         }

@@ -317,7 +317,8 @@ intensity = 40
             extra.extend(["--accel", a]);
         }
         assert_success(&render(&scene, &out, &extra));
-        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
         assert_eq!(json["accel"], accel.unwrap_or("kdtree"), "{json}");
         if accel != Some("brute") {
             assert!(json["accel_bytes"].as_u64().unwrap() > 0);

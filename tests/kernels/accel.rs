@@ -28,8 +28,14 @@ pub fn every_structure(data: &MeshData) -> Vec<Mesh> {
     Accel::ALL
         .iter()
         .map(|&a| {
-            Mesh::with_accel(a.name(), data.clone(), NormalMode::Flat, BuildQuality::Medium, a)
-                .unwrap()
+            Mesh::with_accel(
+                a.name(),
+                data.clone(),
+                NormalMode::Flat,
+                BuildQuality::Medium,
+                a,
+            )
+            .unwrap()
         })
         .collect()
 }
@@ -39,7 +45,11 @@ pub fn every_structure(data: &MeshData) -> Vec<Mesh> {
 pub fn agree(meshes: &[Mesh], ray: &Ray, t_min: f32, t_max: f32, what: &str) -> bool {
     let want = key(&meshes[0], meshes[0].intersect(ray, t_min, t_max));
     let blocked = meshes[0].occluded(ray, t_min, t_max);
-    assert_eq!(blocked, want.is_some(), "{what}: bvh any-hit disagrees with its closest hit, {ray:?}");
+    assert_eq!(
+        blocked,
+        want.is_some(),
+        "{what}: bvh any-hit disagrees with its closest hit, {ray:?}"
+    );
     for m in &meshes[1..] {
         let got = key(m, m.intersect(ray, t_min, t_max));
         assert_eq!(
@@ -48,10 +58,21 @@ pub fn agree(meshes: &[Mesh], ray: &Ray, t_min: f32, t_max: f32, what: &str) -> 
             "{what}: {:?} and the BVH disagree on {ray:?} in ({t_min}, {t_max})",
             m.accel()
         );
-        assert_eq!(m.occluded(ray, t_min, t_max), blocked, "{what}: {:?} any-hit on {ray:?}", m.accel());
+        assert_eq!(
+            m.occluded(ray, t_min, t_max),
+            blocked,
+            "{what}: {:?} any-hit on {ray:?}",
+            m.accel()
+        );
     }
     // Brute force, independently of the brute structure.
-    assert_eq!(key(&meshes[0], meshes[0].intersect_brute_force(ray, t_min, t_max)), want);
+    assert_eq!(
+        key(
+            &meshes[0],
+            meshes[0].intersect_brute_force(ray, t_min, t_max)
+        ),
+        want
+    );
     want.is_some()
 }
 
@@ -82,7 +103,11 @@ fn soup(rng: &mut Rng, n: usize) -> MeshData {
 }
 
 fn random_ray(rng: &mut Rng, inside: bool) -> Ray {
-    let o = if inside { rng.vec(-1.0, 1.0) } else { rng.dir() * rng.range(2.0, 6.0) };
+    let o = if inside {
+        rng.vec(-1.0, 1.0)
+    } else {
+        rng.dir() * rng.range(2.0, 6.0)
+    };
     let target = rng.vec(-1.0, 1.0);
     let mut d = target - o;
     match rng.below(8) {
@@ -126,7 +151,8 @@ fn equal_t_ties_go_to_the_lowest_input_triangle() {
     let n = 12;
     for j in 0..=n {
         for i in 0..=n {
-            data.positions.push(Vec3::new(i as f32 / n as f32, 0.25, j as f32 / n as f32));
+            data.positions
+                .push(Vec3::new(i as f32 / n as f32, 0.25, j as f32 / n as f32));
         }
     }
     // Triangles in a scrambled input order, so BVH leaf order differs.
@@ -148,7 +174,12 @@ fn equal_t_ties_go_to_the_lowest_input_triangle() {
     for v in 0..data.positions.len() {
         let target = data.positions[v];
         for _ in 0..4 {
-            let o = target + Vec3::new(rng.range(-1.0, 1.0), rng.range(0.5, 2.0), rng.range(-1.0, 1.0));
+            let o = target
+                + Vec3::new(
+                    rng.range(-1.0, 1.0),
+                    rng.range(0.5, 2.0),
+                    rng.range(-1.0, 1.0),
+                );
             let ray = Ray::new(o.into(), (target - o).into());
             if agree(&meshes, &ray, 0.0, f32::INFINITY, "flat grid") {
                 ties += 1;
@@ -187,7 +218,12 @@ fn sample_meshes_give_the_same_hits_in_every_structure() {
         return;
     }
     let mut seen = 0;
-    for name in ["Box/glTF/Box.gltf", "Avocado/glTF/Avocado.gltf", "DamagedHelmet/glTF/DamagedHelmet.gltf", "CornellBox/CornellBox.glb"] {
+    for name in [
+        "Box/glTF/Box.gltf",
+        "Avocado/glTF/Avocado.gltf",
+        "DamagedHelmet/glTF/DamagedHelmet.gltf",
+        "CornellBox/CornellBox.glb",
+    ] {
         let p = root.join(name);
         if p.exists() {
             check_scene_meshes(&p, 300, &mut seen);
@@ -203,7 +239,9 @@ fn check_scene_meshes(path: &Path, rays: usize, seen: &mut usize) {
     let mut rng = Rng(23);
     let mut done = std::collections::HashSet::new();
     for obj in &desc.objects {
-        let prism::io::desc::Geometry::Mesh(m) = &obj.geometry else { continue };
+        let prism::io::desc::Geometry::Mesh(m) = &obj.geometry else {
+            continue;
+        };
         if !done.insert(std::sync::Arc::as_ptr(m)) {
             continue;
         }
@@ -222,10 +260,22 @@ fn check_scene_meshes(path: &Path, rays: usize, seen: &mut usize) {
                 lo + (hi - lo) * Vec3A::from(rng.vec(0.0, 1.0))
             };
             let ray = Ray::new(o, target - o);
-            hits += agree(&meshes, &ray, 0.0, f32::INFINITY, &format!("{} in {}", m.name, path.display())) as usize;
+            hits += agree(
+                &meshes,
+                &ray,
+                0.0,
+                f32::INFINITY,
+                &format!("{} in {}", m.name, path.display()),
+            ) as usize;
             // A secondary ray from inside the bounds.
             let o2 = lo + (hi - lo) * Vec3A::from(rng.vec(0.0, 1.0));
-            agree(&meshes, &Ray::new(o2, rng.dir().into()), 1e-4, f32::INFINITY, "inside");
+            agree(
+                &meshes,
+                &Ray::new(o2, rng.dir().into()),
+                1e-4,
+                f32::INFINITY,
+                "inside",
+            );
         }
         assert!(hits > rays / 4, "{}: {hits} of {rays}", m.name);
         *seen += 1;
@@ -251,15 +301,30 @@ fn lattice(res: u32) -> MeshData {
     }
     // Corners so the bounds are exactly the unit cube.
     let k = data.positions.len() as u32;
-    data.positions.extend([Vec3::ZERO, Vec3::new(1e-3, 0.0, 0.0), Vec3::new(0.0, 1e-3, 0.0)]);
-    data.positions.extend([Vec3::ONE, Vec3::new(1.0 - 1e-3, 1.0, 1.0), Vec3::new(1.0, 1.0 - 1e-3, 1.0)]);
+    data.positions.extend([
+        Vec3::ZERO,
+        Vec3::new(1e-3, 0.0, 0.0),
+        Vec3::new(0.0, 1e-3, 0.0),
+    ]);
+    data.positions.extend([
+        Vec3::ONE,
+        Vec3::new(1.0 - 1e-3, 1.0, 1.0),
+        Vec3::new(1.0, 1.0 - 1e-3, 1.0),
+    ]);
     data.indices.push([k, k + 1, k + 2]);
     data.indices.push([k + 3, k + 4, k + 5]);
     data
 }
 
 fn grid_mesh(data: &MeshData) -> Mesh {
-    Mesh::with_accel("grid", data.clone(), NormalMode::Flat, BuildQuality::Medium, Accel::Grid).unwrap()
+    Mesh::with_accel(
+        "grid",
+        data.clone(),
+        NormalMode::Flat,
+        BuildQuality::Medium,
+        Accel::Grid,
+    )
+    .unwrap()
 }
 
 /// Triangles that touch a cell boundary plane from both sides, and rays
@@ -290,13 +355,28 @@ fn dda_ray_along_a_cell_boundary() {
         let o = Vec3A::new(-0.5, yb, z);
         // Along x in the plane y = 0.5, tilted within the plane.
         let d = Vec3A::new(1.0, 0.0, rng.range(-0.05, 0.05));
-        let h = agree(&meshes, &Ray::new(o, d), 0.0, f32::INFINITY, "along y = 0.5");
+        let h = agree(
+            &meshes,
+            &Ray::new(o, d),
+            0.0,
+            f32::INFINITY,
+            "along y = 0.5",
+        );
         hits += h as u32;
     }
     // Along a cell edge: y = 0.5 and z = 0.5 exactly.
     let edge = Ray::new(Vec3A::new(-0.5, 0.5, 0.5), Vec3A::X);
-    assert!(agree(&meshes, &edge, 0.0, f32::INFINITY, "along a cell edge"));
-    assert!(hits > 400, "{hits} of 500 rays in the boundary plane hit its triangles");
+    assert!(agree(
+        &meshes,
+        &edge,
+        0.0,
+        f32::INFINITY,
+        "along a cell edge"
+    ));
+    assert!(
+        hits > 400,
+        "{hits} of 500 rays in the boundary plane hit its triangles"
+    );
 }
 
 /// Axis-aligned rays just outside the grid (missing it) and just inside
@@ -312,12 +392,21 @@ fn dda_axis_aligned_ray_that_misses_the_grid() {
         (Vec3A::new(2.0, 0.5, 0.5), Vec3A::X),
         (Vec3A::new(-2.0, 0.5, 0.5), -Vec3A::X),
     ] {
-        assert!(!agree(&meshes, &Ray::new(o, d), 0.0, f32::INFINITY, "missing ray"), "{o} {d}");
+        assert!(
+            !agree(&meshes, &Ray::new(o, d), 0.0, f32::INFINITY, "missing ray"),
+            "{o} {d}"
+        );
     }
     // Through a row of lattice triangles: hits.
     let s = 1.0 / 6.0;
     let o = Vec3A::new(0.5 * s, 0.5 * s, -1.0);
-    assert!(agree(&meshes, &Ray::new(o, Vec3A::Z), 0.0, f32::INFINITY, "axis ray through a row"));
+    assert!(agree(
+        &meshes,
+        &Ray::new(o, Vec3A::Z),
+        0.0,
+        f32::INFINITY,
+        "axis ray through a row"
+    ));
 }
 
 /// Rays starting inside the grid, in every direction.
@@ -355,11 +444,21 @@ fn dda_negative_zero_direction_components() {
     for i in 0..5 {
         for j in 0..5 {
             let o = Vec3A::new((i as f32 + 0.5) * s, (j as f32 + 0.45) * s, -0.5);
-            for d in [Vec3A::new(0.0, 0.0, 1.0), Vec3A::new(-0.0, 0.0, 1.0), Vec3A::new(0.0, -0.0, 1.0), Vec3A::new(-0.0, -0.0, 1.0)] {
+            for d in [
+                Vec3A::new(0.0, 0.0, 1.0),
+                Vec3A::new(-0.0, 0.0, 1.0),
+                Vec3A::new(0.0, -0.0, 1.0),
+                Vec3A::new(-0.0, -0.0, 1.0),
+            ] {
                 hits += agree(&meshes, &Ray::new(o, d), 0.0, f32::INFINITY, "signed zeros") as u32;
             }
-            let a = meshes[2].intersect(&Ray::new(o, Vec3A::new(0.0, 0.0, 1.0)), 0.0, f32::INFINITY);
-            let b = meshes[2].intersect(&Ray::new(o, Vec3A::new(-0.0, -0.0, 1.0)), 0.0, f32::INFINITY);
+            let a =
+                meshes[2].intersect(&Ray::new(o, Vec3A::new(0.0, 0.0, 1.0)), 0.0, f32::INFINITY);
+            let b = meshes[2].intersect(
+                &Ray::new(o, Vec3A::new(-0.0, -0.0, 1.0)),
+                0.0,
+                f32::INFINITY,
+            );
             assert_eq!(key(&meshes[2], a), key(&meshes[2], b));
         }
     }
@@ -374,21 +473,35 @@ fn dda_closest_hit_in_a_later_cell_than_the_first_found() {
     let mut data = lattice(8);
     let k = data.positions.len() as u32;
     // Big: spans the grid, crossed by the ray near x = 0.9.
-    data.positions.extend([Vec3::new(0.9, -0.1, -0.1), Vec3::new(0.9, 1.1, -0.1), Vec3::new(0.0, 0.5, 1.1)]);
+    data.positions.extend([
+        Vec3::new(0.9, -0.1, -0.1),
+        Vec3::new(0.9, 1.1, -0.1),
+        Vec3::new(0.0, 0.5, 1.1),
+    ]);
     // Small: facing the ray at x = 0.5.
-    data.positions.extend([Vec3::new(0.5, 0.46, -0.05), Vec3::new(0.5, 0.54, -0.05), Vec3::new(0.5, 0.5, 0.05)]);
+    data.positions.extend([
+        Vec3::new(0.5, 0.46, -0.05),
+        Vec3::new(0.5, 0.54, -0.05),
+        Vec3::new(0.5, 0.5, 0.05),
+    ]);
     data.indices.push([k, k + 1, k + 2]);
     data.indices.push([k + 3, k + 4, k + 5]);
     let mesh = grid_mesh(&data);
     let ray = Ray::new(Vec3A::new(0.01, 0.5, 0.0), Vec3A::new(1.0, 0.0, 0.0));
     let h = mesh.intersect(&ray, 0.0, f32::INFINITY).expect("a hit");
-    assert_eq!(mesh.input_triangle(h.triangle as usize), data.indices.len() as u32 - 1, "{h:?}");
+    assert_eq!(
+        mesh.input_triangle(h.triangle as usize),
+        data.indices.len() as u32 - 1,
+        "{h:?}"
+    );
     assert!((h.t - 0.49).abs() < 1e-5, "{h:?}");
     // The big one is hit beyond: without the small one it is found.
     let mut without = data.clone();
     without.indices.pop();
     let mesh = grid_mesh(&without);
-    let far = mesh.intersect(&ray, 0.0, f32::INFINITY).expect("the big triangle");
+    let far = mesh
+        .intersect(&ray, 0.0, f32::INFINITY)
+        .expect("the big triangle");
     assert!(far.t > 0.6, "{far:?}");
     let meshes = every_structure(&data);
     assert!(agree(&meshes, &ray, 0.0, f32::INFINITY, "later cell"));
@@ -406,7 +519,8 @@ fn dda_far_rays_across_edges_on_cell_boundaries() {
     let mut data = MeshData::default();
     for j in 0..=m {
         for i in 0..=m {
-            data.positions.push(Vec3::new(i as f32 / m as f32, j as f32 / m as f32, 0.0));
+            data.positions
+                .push(Vec3::new(i as f32 / m as f32, j as f32 / m as f32, 0.0));
         }
     }
     for j in 0..m {
@@ -419,9 +533,14 @@ fn dda_far_rays_across_edges_on_cell_boundaries() {
     // Two specks give the grid a depth of 1 (54 thin layers of cells).
     let k = data.positions.len() as u32;
     for z in [-0.5, 0.5] {
-        data.positions.extend([Vec3::new(0.5, 0.5, z), Vec3::new(0.5001, 0.5, z), Vec3::new(0.5, 0.5001, z)]);
+        data.positions.extend([
+            Vec3::new(0.5, 0.5, z),
+            Vec3::new(0.5001, 0.5, z),
+            Vec3::new(0.5, 0.5001, z),
+        ]);
     }
-    data.indices.extend([[k, k + 1, k + 2], [k + 3, k + 4, k + 5]]);
+    data.indices
+        .extend([[k, k + 1, k + 2], [k + 3, k + 4, k + 5]]);
     let meshes = every_structure(&data);
     assert_eq!(meshes[2].grid().unwrap().resolution(), [m, m, m]);
     let mut rng = Rng(31);
@@ -431,7 +550,13 @@ fn dda_far_rays_across_edges_on_cell_boundaries() {
         let x = i as f32 / m as f32 + rng.range(-1e-2, 1e-2);
         let target = Vec3::new(x, rng.range(0.05, 0.95), 0.0);
         let o = target + Vec3::new(rng.range(-5e4, 5e4), rng.range(-5e4, 5e4), 1e5);
-        hits += agree(&meshes, &Ray::new(o.into(), (target - o).into()), 0.0, f32::INFINITY, "far sheet") as u32;
+        hits += agree(
+            &meshes,
+            &Ray::new(o.into(), (target - o).into()),
+            0.0,
+            f32::INFINITY,
+            "far sheet",
+        ) as u32;
     }
     assert!(hits > 3900, "{hits}");
 }

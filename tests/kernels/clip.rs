@@ -57,13 +57,19 @@ fn cohen_sutherland_and_liang_barsky_agree() {
                     c0.distance(l0) <= tol && c1.distance(l1) <= tol,
                     "segment {a} {b}: CS {c0} {c1}, LB {l0} {l1}"
                 );
-                assert!(inside(c0, &r, 0.0) && inside(c1, &r, 0.0), "{c0} {c1} outside");
+                assert!(
+                    inside(c0, &r, 0.0) && inside(c1, &r, 0.0),
+                    "{c0} {c1} outside"
+                );
             }
             _ => {
                 // Only a segment touching the rectangle within rounding may
                 // differ: check it grazes.
                 let (p, q) = cs.or(lb).unwrap();
-                assert!(p.distance(q) <= 1e-9, "segment {a} {b}: CS {cs:?}, LB {lb:?}");
+                assert!(
+                    p.distance(q) <= 1e-9,
+                    "segment {a} {b}: CS {cs:?}, LB {lb:?}"
+                );
             }
         }
         if k % 50 == 0 {
@@ -76,11 +82,19 @@ fn cohen_sutherland_and_liang_barsky_agree() {
                 let s = a + (b - a) * (i as f64 / n as f64);
                 if inside(s, &r, 0.0) {
                     any_inside = true;
-                    let (p, q) = clip.unwrap_or_else(|| panic!("{a} {b}: sample {s} inside, clip empty"));
+                    let (p, q) =
+                        clip.unwrap_or_else(|| panic!("{a} {b}: sample {s} inside, clip empty"));
                     // On segment p-q: distance to it within rounding.
                     let d = q - p;
-                    let t = if d.length_squared() > 0.0 { ((s - p).dot(d) / d.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
-                    assert!((p + d * t).distance(s) <= 1e-9, "{a} {b}: sample {s} off the clip {p} {q}");
+                    let t = if d.length_squared() > 0.0 {
+                        ((s - p).dot(d) / d.length_squared()).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    assert!(
+                        (p + d * t).distance(s) <= 1e-9,
+                        "{a} {b}: sample {s} off the clip {p} {q}"
+                    );
                 }
             }
             if let Some((p, q)) = clip
@@ -90,7 +104,10 @@ fn cohen_sutherland_and_liang_barsky_agree() {
             }
         }
     }
-    assert!(accepted > 200_000 && partial > 100_000, "{accepted} {partial}");
+    assert!(
+        accepted > 200_000 && partial > 100_000,
+        "{accepted} {partial}"
+    );
 }
 
 /// Length of the vertical slice of polygon `poly` at `x` (even-odd).
@@ -152,8 +169,14 @@ fn intersection_area(subject: &[DVec2], clip: &[DVec2]) -> f64 {
             continue;
         }
         let x = 0.5 * (w[0] + w[1]);
-        let Some(&c) = slice(clip, x, None).first() else { continue };
-        area += dx * slice(subject, x, Some(c)).iter().map(|(a, b)| b - a).sum::<f64>();
+        let Some(&c) = slice(clip, x, None).first() else {
+            continue;
+        };
+        area += dx
+            * slice(subject, x, Some(c))
+                .iter()
+                .map(|(a, b)| b - a)
+                .sum::<f64>();
     }
     area
 }
@@ -163,9 +186,13 @@ fn intersection_area(subject: &[DVec2], clip: &[DVec2]) -> f64 {
 /// apart (which keeps it simple), at random radii.
 fn star(rng: &mut Rng, n: usize) -> Vec<DVec2> {
     let c = pt(rng, -0.5, 0.5);
-    let angles: Vec<f64> =
-        (0..n).map(|i| (i as f64 + 0.4 * f(rng)) / n as f64 * std::f64::consts::TAU).collect();
-    angles.iter().map(|&a| c + DVec2::new(a.cos(), a.sin()) * (0.2 + f(rng))).collect()
+    let angles: Vec<f64> = (0..n)
+        .map(|i| (i as f64 + 0.4 * f(rng)) / n as f64 * std::f64::consts::TAU)
+        .collect();
+    angles
+        .iter()
+        .map(|&a| c + DVec2::new(a.cos(), a.sin()) * (0.2 + f(rng)))
+        .collect()
 }
 
 /// A random convex polygon, counter-clockwise: points on an ellipse.
@@ -175,7 +202,10 @@ fn convex(rng: &mut Rng, n: usize) -> Vec<DVec2> {
     let mut angles: Vec<f64> = (0..n).map(|_| f(rng) * std::f64::consts::TAU).collect();
     angles.sort_by(f64::total_cmp);
     angles.dedup();
-    angles.iter().map(|&a| c + DVec2::new(rx * a.cos(), ry * a.sin())).collect()
+    angles
+        .iter()
+        .map(|&a| c + DVec2::new(rx * a.cos(), ry * a.sin()))
+        .collect()
 }
 
 #[test]
@@ -183,7 +213,11 @@ fn sutherland_hodgman_area_equals_the_intersection_area() {
     let mut rng = Rng(2);
     let mut nonempty = 0;
     for k in 0..3000 {
-        let subject = if k % 2 == 0 { star(&mut rng, 3 + k % 9) } else { convex(&mut rng, 3 + k % 7) };
+        let subject = if k % 2 == 0 {
+            star(&mut rng, 3 + k % 9)
+        } else {
+            convex(&mut rng, 3 + k % 7)
+        };
         let clip = convex(&mut rng, 3 + (k / 2) % 8);
         let out = clip_polygon_convex(&subject, &clip);
         let got = polygon_area(&out);
@@ -195,17 +229,27 @@ fn sutherland_hodgman_area_equals_the_intersection_area() {
         nonempty += (want > 1e-3) as u32;
         // Idempotent: clipping again changes nothing but rounding.
         let again = clip_polygon_convex(&out, &clip);
-        assert!((polygon_area(&again) - got).abs() <= 1e-12, "case {k}: not idempotent");
+        assert!(
+            (polygon_area(&again) - got).abs() <= 1e-12,
+            "case {k}: not idempotent"
+        );
         // Vertices may move along an edge lying on the clip boundary (a
         // concave subject's bridges), but stay on the first result's outline.
         for p in &again {
             let on_outline = (0..out.len()).any(|i| {
                 let (a, b) = (out[i], out[(i + 1) % out.len()]);
                 let d = b - a;
-                let t = if d.length_squared() > 0.0 { ((*p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+                let t = if d.length_squared() > 0.0 {
+                    ((*p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 (a + d * t).distance(*p) <= 1e-12
             });
-            assert!(on_outline, "case {k}: new vertex {p} off the first result's outline");
+            assert!(
+                on_outline,
+                "case {k}: new vertex {p} off the first result's outline"
+            );
         }
     }
     assert!(nonempty > 1500, "{nonempty}");
@@ -220,13 +264,23 @@ fn box_clipping_is_exact_inside_and_idempotent() {
         let tri = [0; 3].map(|_| DVec3::new(f(&mut rng), f(&mut rng), f(&mut rng)) * 2.0 - 1.0);
         let out = clip_polygon_box(&tri, lo, hi);
         for p in &out {
-            assert!(p.cmpge(lo).all() && p.cmple(hi).all(), "{p} outside the box");
+            assert!(
+                p.cmpge(lo).all() && p.cmple(hi).all(),
+                "{p} outside the box"
+            );
             // On the triangle's plane.
             let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-            assert!(n.dot(*p - tri[0]).abs() <= 1e-12 * n.length(), "{p} off the plane");
+            assert!(
+                n.dot(*p - tri[0]).abs() <= 1e-12 * n.length(),
+                "{p} off the plane"
+            );
         }
         kept += !out.is_empty() as u32;
-        assert_eq!(clip_polygon_box(&out, lo, hi), out, "box clipping is not idempotent");
+        assert_eq!(
+            clip_polygon_box(&out, lo, hi),
+            out,
+            "box clipping is not idempotent"
+        );
     }
     assert!(kept > 2000, "{kept}");
 }
@@ -240,14 +294,19 @@ fn homogeneous_clipping_never_divides_by_nonpositive_w() {
     let mut straddling = 0;
     let mut r = || f(&mut rng) * 4.0 - 2.0;
     for k in 0..20_000 {
-        let poly: Vec<DVec4> = (0..3 + k % 3).map(|_| DVec4::new(r(), r(), r(), r())).collect();
+        let poly: Vec<DVec4> = (0..3 + k % 3)
+            .map(|_| DVec4::new(r(), r(), r(), r()))
+            .collect();
         let behind = poly.iter().filter(|p| p.w <= 0.0).count();
         straddling += (behind > 0 && behind < poly.len()) as u32;
         let out = clip_polygon_homogeneous(&poly);
         for p in &out {
             assert!(p.w >= MIN_W, "vertex {p} with w below the minimum");
             let q = project(*p).expect("projectable");
-            assert!(q.x.abs() <= 1.0 + 1e-9 && q.y.abs() <= 1.0 + 1e-9, "{q} outside the view");
+            assert!(
+                q.x.abs() <= 1.0 + 1e-9 && q.y.abs() <= 1.0 + 1e-9,
+                "{q} outside the view"
+            );
         }
         if poly.iter().all(|p| p.w <= 0.0) {
             assert!(out.is_empty(), "a polygon behind the camera survived");
@@ -261,7 +320,10 @@ fn homogeneous_clipping_never_divides_by_nonpositive_w() {
                 let t = i as f64 / 64.0;
                 let s = a + (b - a) * t;
                 if s.w >= MIN_W && s.x.abs() <= s.w && s.y.abs() <= s.w {
-                    assert!(t >= t0 - 1e-9 && t <= t1 + 1e-9, "{a} {b}: t = {t} inside but outside [{t0}, {t1}]");
+                    assert!(
+                        t >= t0 - 1e-9 && t <= t1 + 1e-9,
+                        "{a} {b}: t = {t} inside but outside [{t0}, {t1}]"
+                    );
                 }
             }
         }

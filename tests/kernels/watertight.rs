@@ -80,7 +80,16 @@ impl Solid {
             ..Default::default()
         };
         [Accel::Kdtree, Accel::Grid]
-            .map(|a| Mesh::with_accel(self.name, data.clone(), NormalMode::Flat, BuildQuality::Medium, a).unwrap())
+            .map(|a| {
+                Mesh::with_accel(
+                    self.name,
+                    data.clone(),
+                    NormalMode::Flat,
+                    BuildQuality::Medium,
+                    a,
+                )
+                .unwrap()
+            })
             .into()
     }
 
@@ -353,7 +362,12 @@ fn same_in_other_structures(mesh: &Mesh, others: &[Mesh], ray: &Ray) {
             m.name,
             m.accel()
         );
-        assert_eq!(m.occluded(ray, 0.0, f32::INFINITY), want.is_some(), "{:?} any-hit", m.accel());
+        assert_eq!(
+            m.occluded(ray, 0.0, f32::INFINITY),
+            want.is_some(),
+            "{:?} any-hit",
+            m.accel()
+        );
     }
 }
 

@@ -193,7 +193,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let mut results = Vec::new();
     for scene in &args.scenes {
         for &accel in &args.accel {
-            let r = pool.install(|| bench_scene(scene, &args, accel.into(), batch_paths, threads))?;
+            let r =
+                pool.install(|| bench_scene(scene, &args, accel.into(), batch_paths, threads))?;
             if !args.json {
                 print_table(&r);
             }

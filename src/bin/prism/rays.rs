@@ -424,7 +424,11 @@ pub fn run(args: RaysArgs) -> Result<()> {
                 println!("  build ({}), {t} threads: {ms:.1} ms", result.accel);
             }
         }
-        println!("  structure: {}, {:.1} MB", result.accel, result.accel_bytes as f64 / 1e6);
+        println!(
+            "  structure: {}, {:.1} MB",
+            result.accel,
+            result.accel_bytes as f64 / 1e6
+        );
         println!(
             "  {:<11} {:<8} {:>7} {:>10} {:>12} {:>9} {:>9}",
             "rays", "mode", "threads", "best Mr/s", "median Mr/s", "hits", "agree"

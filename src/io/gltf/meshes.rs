@@ -158,7 +158,7 @@ fn build_primitive(
         st.quality.accel.unwrap_or_default(),
     )
     .map(|m| Some((m, offset)))
-        .map_err(fail)
+    .map_err(fail)
 }
 
 /// Converts an index list of the given mode to triangles (glTF's vertex
