@@ -11,6 +11,7 @@ use crate::core::math::Color;
 use crate::core::settings::RenderSettings;
 use crate::geometry::mesh::BuildQuality;
 use crate::image::film::Film;
+use crate::image::lines::LineOverlay;
 use crate::integrators::IntegratorKind;
 use crate::integrators::counters::RenderCounters;
 use crate::integrators::progressive::Accumulator;
@@ -109,6 +110,12 @@ pub struct Frame {
     /// Samples per pixel in the image (more than `spp` when progressive
     /// frames accumulated).
     pub samples: u32,
+    /// Feature-line coverage, when the settings ask for lines.
+    pub lines: Option<LineOverlay>,
+    /// Rays cast by the line stage (not in `counters`).
+    pub line_rays: u64,
+    /// Seconds spent finding lines.
+    pub line_seconds: f64,
 }
 
 /// Where the render origin (floating origin) goes. Entities keep their

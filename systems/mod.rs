@@ -15,7 +15,9 @@
 //!    ([`sync::commit_scene`]);
 //! 3. [`PrismSystems::Render`]: trace the image into [`Frame`], with
 //!    [`render_recursive`] or, stage by stage, with the wavefront systems
-//!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]).
+//!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]), then,
+//!    only when the settings ask for them, the feature lines
+//!    ([`lines::render_feature_lines`]).
 //!
 //! Games add these stages to their own schedule with [`PrismPlugin`]; see
 //! its example. With [`ProgressiveRendering`] on, frames of an unchanged
@@ -28,6 +30,7 @@
 pub mod components;
 pub mod demo;
 pub mod frame;
+pub mod lines;
 pub mod render;
 pub mod renderer;
 pub mod sync;
@@ -90,6 +93,11 @@ pub fn add_render_systems(schedule: &mut Schedule) {
             .in_set(PrismSystems::Render),
         wavefront::render_wavefront
             .run_if(integrator_is(IntegratorKind::Wavefront))
+            .in_set(PrismSystems::Render),
+        lines::render_feature_lines
+            .run_if(lines::lines_requested)
+            .after(render_recursive)
+            .after(wavefront::render_wavefront)
             .in_set(PrismSystems::Render),
     ));
 }

@@ -27,6 +27,7 @@ use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
+use crate::core::settings::Style;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
     EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
@@ -552,7 +553,8 @@ pub fn render_wavefront(world: &mut World) {
     let settings = &config.settings;
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
-    let shadows = features.needs_shadow_rays(settings.transport);
+    // Gooch shading traces no shadow rays.
+    let shadows = features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch;
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     let camera = CameraRays::relative_to(&camera, scene.origin(), settings.width, settings.height);

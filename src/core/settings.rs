@@ -29,9 +29,146 @@ pub struct RenderSettings {
     /// Path tracing: bounce from which Russian roulette may end paths
     /// (`None`: never; paths run to `max_depth`).
     pub rr_start_depth: Option<u32>,
+    /// How surfaces lit by lights are shaded: physically, or with Gooch's
+    /// cool-to-warm tones for illustration.
+    pub style: Style,
+    /// Parameters of [`Style::Gooch`] (unused otherwise).
+    pub gooch: GoochParams,
+    /// Feature lines (silhouettes, creases, borders, material boundaries)
+    /// drawn over the image; `None` draws none and runs no line stage.
+    pub lines: Option<LineSettings>,
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+}
+
+/// How surfaces with a diffuse or glossy lobe are shaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Style {
+    /// The transport's physically based local lighting.
+    #[default]
+    Shaded,
+    /// Gooch, Gooch, Shirley and Cohen (1998): cool-to-warm tones from the
+    /// key light, white highlights, no shadows; mirrors and glass still
+    /// reflect and refract (Whitted transport only).
+    Gooch,
+}
+
+impl Style {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Style::Shaded => "shaded",
+            Style::Gooch => "gooch",
+        }
+    }
+}
+
+/// Gooch shading's parameters: `k_cool = (0, 0, b) + alpha k_d`,
+/// `k_warm = (y, y, 0) + beta k_d`, and the colour
+/// `t k_warm + (1 - t) k_cool` with `t = (1 + n.l) / 2`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct GoochParams {
+    /// Blue of the cool tone (default 0.4).
+    pub b: f32,
+    /// Yellow of the warm tone (default 0.4).
+    pub y: f32,
+    /// Share of the base colour in the cool tone (default 0.2).
+    pub alpha: f32,
+    /// Share of the base colour in the warm tone (default 0.6).
+    pub beta: f32,
+}
+
+impl Default for GoochParams {
+    fn default() -> Self {
+        Self {
+            b: 0.4,
+            y: 0.4,
+            alpha: 0.2,
+            beta: 0.6,
+        }
+    }
+}
+
+/// Blender Freestyle's default crease angle, in degrees: edges whose
+/// faces' normals deviate by more than this are creases.
+pub const DEFAULT_CREASE_DEGREES: f32 = 45.57;
+
+/// Largest line width accepted, in pixels: the stencil grows with the
+/// square of the width.
+pub const MAX_LINE_WIDTH: f32 = 16.0;
+
+/// Feature lines found by ray casting: what is drawn and how.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineSettings {
+    /// Line width in pixels, in `(0, 16]` (default 1).
+    pub width: f32,
+    /// Line colour, in display (sRGB-encoded) values in `[0, 1]` for PNG
+    /// output, linear for EXR (default black).
+    pub color: [f32; 3],
+    /// Crease threshold in degrees, in `[0, 180]`: a normal deviation of
+    /// more than this between neighbouring samples of one object is a
+    /// crease (default [`DEFAULT_CREASE_DEGREES`]; 180 turns creases off).
+    pub crease_degrees: f32,
+}
+
+impl Default for LineSettings {
+    fn default() -> Self {
+        Self {
+            width: 1.0,
+            color: [0.0; 3],
+            crease_degrees: DEFAULT_CREASE_DEGREES,
+        }
+    }
+}
+
+impl LineSettings {
+    /// Rejects unusable line settings with a message naming the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.width > 0.0 && self.width <= MAX_LINE_WIDTH) {
+            return Err(format!(
+                "line width must be more than 0 and at most {MAX_LINE_WIDTH} pixels, got {}",
+                self.width
+            ));
+        }
+        if !(self.crease_degrees >= 0.0 && self.crease_degrees <= 180.0) {
+            return Err(format!(
+                "crease angle must be between 0 and 180 degrees, got {}",
+                self.crease_degrees
+            ));
+        }
+        if !self
+            .color
+            .iter()
+            .all(|c| c.is_finite() && (0.0..=1.0).contains(c))
+        {
+            return Err(format!(
+                "line colour channels must be in [0, 1], got {:?}",
+                self.color
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl GoochParams {
+    /// Rejects non-finite or negative parameters.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("b", self.b),
+            ("y", self.y),
+            ("alpha", self.alpha),
+            ("beta", self.beta),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!(
+                    "Gooch parameter {name} must be finite and non-negative, got {v}"
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// How light is transported: the model, orthogonal to the integrator that
@@ -113,6 +250,9 @@ impl Default for RenderSettings {
             transport: Transport::Whitted,
             light_samples: 1,
             rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
+            style: Style::Shaded,
+            gooch: GoochParams::default(),
+            lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
         }
     }
@@ -179,6 +319,17 @@ impl RenderSettings {
                 "min contribution must be a finite non-negative number, got {}",
                 self.min_contribution
             ));
+        }
+        if self.style == Style::Gooch && self.transport != Transport::Whitted {
+            return Err(
+                "the Gooch style shades with Whitted transport (mirrors and glass included); \
+                 it does not combine with path transport"
+                    .into(),
+            );
+        }
+        self.gooch.validate()?;
+        if let Some(l) = &self.lines {
+            l.validate()?;
         }
         Ok(())
     }

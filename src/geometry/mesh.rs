@@ -692,6 +692,11 @@ impl Mesh {
     pub fn positions(&self) -> &[Vec3A] {
         &self.positions
     }
+
+    /// Vertex indices of every triangle, in BVH order.
+    pub fn triangle_indices(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
 }
 
 /// Area-weighted vertex normals.

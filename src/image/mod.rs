@@ -2,5 +2,6 @@
 //! output written atomically, and error metrics between images.
 
 pub mod film;
+pub mod lines;
 pub mod metrics;
 pub mod output;

@@ -18,6 +18,7 @@ use image::{ExtendedColorType, ImageEncoder};
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
 use crate::image::film::Film;
+use crate::image::lines::LineOverlay;
 
 /// How radiance is mapped into `[0, 1]` for 8-bit output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -103,6 +104,38 @@ pub fn to_srgb8(c: Color, opts: &PngOptions) -> [u8; 3] {
 /// Writes `film` to `path` in the format its extension names, through
 /// [`write_atomic`].
 pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
+    write_image_with_lines(path, film, None, opts)
+}
+
+/// [`write_image`] with feature lines drawn over the image: for PNG after
+/// exposure and tone mapping (the ink keeps its colour at any exposure),
+/// for EXR mixed into the linear radiance. The overlay must have the
+/// film's size.
+pub fn write_image_with_lines(
+    path: &Path,
+    film: &Film,
+    lines: Option<&LineOverlay>,
+    opts: &PngOptions,
+) -> Result<()> {
+    if let Some(l) = lines
+        && (l.width, l.height) != (film.width, film.height)
+    {
+        return Err(Error::Output {
+            path: path.to_path_buf(),
+            message: format!(
+                "line overlay is {}x{} but the image is {}x{}",
+                l.width, l.height, film.width, film.height
+            ),
+        });
+    }
+    let linear;
+    let film = match (lines, OutputFormat::from_path(path)) {
+        (Some(l), Ok(OutputFormat::Exr)) => {
+            linear = l.over_linear(film);
+            &linear
+        }
+        _ => film,
+    };
     let format = OutputFormat::from_path(path)?;
     let err = |message: String| Error::Output {
         path: path.to_path_buf(),
@@ -115,7 +148,14 @@ pub fn write_image(path: &Path, film: &Film, opts: &PngOptions) -> Result<()> {
             let bytes: Vec<u8> = film
                 .pixels
                 .iter()
-                .flat_map(|&c| to_srgb8(c, opts))
+                .enumerate()
+                .flat_map(|(i, &c)| {
+                    let rgb = to_srgb8(c, opts);
+                    match lines {
+                        Some(l) => l.over_srgb8(i, rgb),
+                        None => rgb,
+                    }
+                })
                 .collect();
             image::codecs::png::PngEncoder::new(&mut w)
                 .write_image(&bytes, film.width, film.height, ExtendedColorType::Rgb8)

@@ -2,8 +2,10 @@
 //! camera into a [`Film`](crate::image::film::Film).
 
 pub mod counters;
+pub mod lines;
 pub mod progressive;
 pub mod recursive;
+pub mod vector_lines;
 pub mod wavefront;
 
 use glam::Vec2;

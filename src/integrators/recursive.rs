@@ -7,11 +7,12 @@ use rayon::prelude::*;
 use super::{Progress, accumulate, camera_rays, film_sample};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
-use crate::core::settings::{RenderSettings, Transport};
+use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelSum};
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
+use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
@@ -32,7 +33,9 @@ pub fn trace(
     };
     let it = Interaction::new(scene, ray, &hit);
     let mut radiance = it.surface.emission;
-    if it.is_lit_by_lights() {
+    if it.is_lit_by_lights() && settings.style == Style::Gooch {
+        radiance += gooch_shade(&settings.gooch, scene.lights(), &it);
+    } else if it.is_lit_by_lights() {
         for light in scene.lights() {
             if let Some(q) = direct_light(&it, light) {
                 counters.rays.shadow += 1;

@@ -73,6 +73,12 @@ pub struct SettingsDesc {
     /// Structure over mesh triangles asked for by the file (applied when
     /// it was loaded; kept for reporting).
     pub accel: Option<crate::core::settings::Accel>,
+    /// Shading style.
+    pub style: Option<crate::core::settings::Style>,
+    /// Gooch parameters.
+    pub gooch: Option<crate::core::settings::GoochParams>,
+    /// Feature lines to draw.
+    pub lines: Option<crate::core::settings::LineSettings>,
     /// Random numbers.
     pub sampler: Option<crate::core::rng::SamplerKind>,
 }
@@ -101,6 +107,9 @@ impl SettingsDesc {
                 .rr_start_depth
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
+            style: self.style.or(under.style).unwrap_or(d.style),
+            gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
+            lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
         }
     }

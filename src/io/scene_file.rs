@@ -57,6 +57,12 @@ struct FileSettings {
     russian_roulette: Option<FileRoulette>,
     /// Structure over mesh triangles: bvh, kdtree, grid or brute.
     accel: Option<crate::core::settings::Accel>,
+    /// `"shaded"` or `"gooch"`.
+    style: Option<FileStyle>,
+    /// Gooch parameters (each optional).
+    gooch: Option<FileGooch>,
+    /// Feature lines; the table's presence turns them on.
+    lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
 }
@@ -66,6 +72,30 @@ struct FileSettings {
 enum FileSampler {
     Sobol,
     Hash,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileStyle {
+    Shaded,
+    Gooch,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FileGooch {
+    b: Option<f32>,
+    y: Option<f32>,
+    alpha: Option<f32>,
+    beta: Option<f32>,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FileLines {
+    width: Option<f32>,
+    color: Option<[f32; 3]>,
+    crease_angle: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -450,6 +480,31 @@ impl Ctx<'_> {
         {
             return Err(self.err(format!("settings.exposure must be finite, got {e}")));
         }
+        let gooch = s.gooch.map(|g| {
+            let d = crate::core::settings::GoochParams::default();
+            crate::core::settings::GoochParams {
+                b: g.b.unwrap_or(d.b),
+                y: g.y.unwrap_or(d.y),
+                alpha: g.alpha.unwrap_or(d.alpha),
+                beta: g.beta.unwrap_or(d.beta),
+            }
+        });
+        if let Some(g) = &gooch {
+            g.validate()
+                .map_err(|e| self.err(format!("settings.gooch: {e}")))?;
+        }
+        let lines = s.lines.map(|l| {
+            let d = crate::core::settings::LineSettings::default();
+            crate::core::settings::LineSettings {
+                width: l.width.unwrap_or(d.width),
+                color: l.color.unwrap_or(d.color),
+                crease_degrees: l.crease_angle.unwrap_or(d.crease_degrees),
+            }
+        });
+        if let Some(l) = &lines {
+            l.validate()
+                .map_err(|e| self.err(format!("settings.lines: {e}")))?;
+        }
         Ok(SettingsDesc {
             width: s.width,
             height: s.height,
@@ -469,6 +524,12 @@ impl Ctx<'_> {
                 FileRoulette::StartDepth(d) => Some(d),
             }),
             accel: s.accel,
+            style: s.style.map(|t| match t {
+                FileStyle::Shaded => crate::core::settings::Style::Shaded,
+                FileStyle::Gooch => crate::core::settings::Style::Gooch,
+            }),
+            gooch,
+            lines,
             sampler: s.sampler.map(|k| match k {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,

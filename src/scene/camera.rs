@@ -1,7 +1,7 @@
 //! Pinhole camera: rays through an image plane.
 
 use bevy_ecs::component::Component;
-use glam::{DVec3, Vec2, Vec3, Vec3A};
+use glam::{DVec3, Mat3A, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
 
@@ -112,5 +112,45 @@ impl CameraRays {
     pub fn ray(&self, p: Vec2) -> Ray {
         let d = self.top_left + self.dx * p.x + self.dy * p.y;
         Ray::new(self.origin, d.normalize())
+    }
+
+    /// The eye: where every camera ray starts.
+    pub fn origin(&self) -> Vec3A {
+        self.origin
+    }
+
+    /// The inverse of [`CameraRays::ray`]: prepares the projection of
+    /// world points onto the film.
+    pub fn projection(&self) -> CameraProjection {
+        CameraProjection {
+            origin: self.origin,
+            to_film: Mat3A::from_cols(self.top_left, self.dx, self.dy).inverse(),
+        }
+    }
+}
+
+/// World points to film positions: the inverse of [`CameraRays::ray`].
+#[derive(Clone, Copy, Debug)]
+pub struct CameraProjection {
+    origin: Vec3A,
+    /// Inverse of the matrix whose columns are the image plane's top-left
+    /// corner and its steps per pixel.
+    to_film: Mat3A,
+}
+
+impl CameraProjection {
+    /// Film position (pixels, as [`CameraRays::ray`] takes them) and depth
+    /// of world point `p`. The depth is the distance along the viewing
+    /// direction; points at or behind the eye have depth `<= 0` and no
+    /// meaningful film position.
+    #[inline]
+    pub fn project(&self, p: Vec3A) -> (Vec2, f32) {
+        let v = self.to_film * (p - self.origin);
+        (Vec2::new(v.y / v.x, v.z / v.x), v.x)
+    }
+
+    /// The eye.
+    pub fn origin(&self) -> Vec3A {
+        self.origin
     }
 }

@@ -241,6 +241,10 @@ pub struct SurfaceSample {
     pub ior: f32,
     /// Emitted radiance.
     pub emission: Color,
+    /// Base colour with its texture (what Gooch shading tones).
+    pub base: Color,
+    /// Weight of the diffuse lobe: `diffuse` is `base` times this.
+    pub diffuse_weight: f32,
 }
 
 /// The Whitted lobes that a glTF metallic-roughness surface maps to.
@@ -374,6 +378,8 @@ impl Material {
                 transmission_tint: base,
                 ior: self.ior,
                 emission,
+                base,
+                diffuse_weight: (1.0 - metallic.clamp(0.0, 1.0)) * (1.0 - transmission),
             };
         }
         SurfaceSample {
@@ -385,6 +391,8 @@ impl Material {
             transmission_tint: base,
             ior: self.ior,
             emission,
+            base,
+            diffuse_weight: self.diffuse,
         }
     }
 }

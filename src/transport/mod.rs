@@ -3,6 +3,7 @@
 //! scattering, and path tracing's BSDF sampling, next-event estimation and
 //! roulette.
 
+pub mod gooch;
 pub mod interaction;
 pub mod path;
 pub mod whitted;

@@ -179,6 +179,14 @@ fn help_explains_every_option() {
         "--tonemap",
         "--integrator",
         "--bvh-quality",
+        "--style",
+        "--gooch",
+        "--lines",
+        "--line-width",
+        "--line-color",
+        "--crease-angle",
+        "--lines-svg",
+        "--hidden-lines",
     ] {
         assert!(help.contains(opt), "--help lacks {opt}:\n{help}");
     }
@@ -336,6 +344,96 @@ intensity = 40
     std::fs::write(&bad_scene, "[settings]\naccel = \"octree\"\n").unwrap();
     let out = dir.path().join("bad2.png");
     assert_clean_failure(&render(&bad_scene, &out, &[]), &out, &["accel"]);
+}
+
+#[test]
+fn illustration_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("whitted.toml");
+    let out = dir.path().join("w.png");
+    let small = ["--width", "16", "--height", "12"];
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--line-width", "-1"], &["line width"]),
+        (&["--line-width", "0"], &["line width"]),
+        (&["--crease-angle", "200"], &["crease angle", "180"]),
+        (&["--crease-angle", "-5"], &["crease angle"]),
+        (&["--line-color", "0,2,0"], &["colour"]),
+        (
+            &["--lines-svg", "/no/such/folder/lines.svg"],
+            &["lines.svg"],
+        ),
+        (&["--lines-svg", "lines.txt"], &[".svg"]),
+        (
+            &["--style", "gooch", "--transport", "path"],
+            &["gooch", "path"],
+        ),
+        (&["--gooch", "0.4,nan,0.2,0.6"], &["gooch"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = small.to_vec();
+        args.extend_from_slice(extra);
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+    }
+    // Bad [settings] in a scene file are reported with the key's name.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[settings]\nlines = { crease_angle = 181 }\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
+    )
+    .unwrap();
+    let o = render(&bad, &out, &[]);
+    assert_clean_failure(&o, &out, &["settings.lines", "crease angle"]);
+}
+
+#[test]
+fn lines_and_svg_are_written_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("whitted.toml");
+    let out = dir.path().join("w.png");
+    let svg = dir.path().join("w.svg");
+    let o = render(
+        &scene,
+        &out,
+        &[
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--style",
+            "gooch",
+            "--lines",
+            "--lines-svg",
+        ],
+    );
+    // --lines-svg takes a value: without one the command line is refused.
+    assert_failed_without_panic(&o);
+    let o = prism()
+        .arg("render")
+        .arg(&scene)
+        .arg("-o")
+        .arg(&out)
+        .args([
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--style",
+            "gooch",
+            "--line-width",
+            "1.5",
+        ])
+        .arg("--lines-svg")
+        .arg(&svg)
+        .arg("--hidden-lines")
+        .output()
+        .unwrap();
+    assert_success(&o);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<?xml") && text.trim_end().ends_with("</svg>"));
+    assert!(out.exists());
+    // Only the image and the SVG: no temporary file is left behind.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
 }
 
 /// `--render-origin`: a scene translated by 1e7 renders (EXR, bit for bit)

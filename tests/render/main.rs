@@ -14,12 +14,15 @@
 //! * `cargo test --test render wavefront::` — the wavefront integrator
 //!   against the recursive one, and its queues;
 //! * `cargo test --test render scene_updates::` — incremental scene updates
-//!   against scenes built from scratch, progressive accumulation.
+//!   against scenes built from scratch, progressive accumulation;
+//! * `cargo test --test render illustration::` — Gooch shading against its
+//!   closed form, feature lines and their vector (SVG) form.
 
 #[path = "../common/mod.rs"]
 mod common;
 
 mod analytic;
+mod illustration;
 mod large_worlds;
 mod path;
 mod robustness;

@@ -180,6 +180,8 @@ fn glass(ior: f32) -> SurfaceSample {
         transmission_tint: Color::ONE,
         ior,
         emission: Color::ZERO,
+        base: Color::ONE,
+        diffuse_weight: 0.0,
     }
 }
 

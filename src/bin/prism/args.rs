@@ -189,6 +189,24 @@ pub enum ToneMapArg {
     Reinhard,
 }
 
+/// `--style` (render).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum StyleArg {
+    /// The transport's physically based lighting.
+    Shaded,
+    /// Gooch cool-to-warm shading for illustration (no shadows).
+    Gooch,
+}
+
+impl From<StyleArg> for prism::core::settings::Style {
+    fn from(s: StyleArg) -> Self {
+        match s {
+            StyleArg::Shaded => prism::core::settings::Style::Shaded,
+            StyleArg::Gooch => prism::core::settings::Style::Gooch,
+        }
+    }
+}
+
 /// `--integrator` (render, tradeoff).
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum IntegratorArg {

@@ -19,6 +19,7 @@ mod rays;
 mod render;
 mod stats;
 mod tradeoff;
+mod vector;
 
 #[derive(Subcommand, Debug)]
 enum Command {

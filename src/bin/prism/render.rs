@@ -13,11 +13,14 @@ use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::wavefront::BatchSize;
 use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
+use crate::args::StyleArg;
 use crate::args::{
     BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
     SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
 use crate::stats::{RenderStats, WavefrontStatsJson};
+use crate::vector;
+use prism::core::settings::{GoochParams, LineSettings};
 
 /// `--render-origin`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,6 +88,53 @@ pub struct RenderArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
+    /// Shading style: `shaded` (the transport's lighting) or `gooch`
+    /// (cool-to-warm tones from the key light, the scene's first light, for
+    /// illustration; Whitted transport only) [default: the scene's, else shaded].
+    #[arg(long, value_enum)]
+    style: Option<StyleArg>,
+    /// Gooch parameters b, y, alpha, beta: cool tone (0,0,b) + alpha kd,
+    /// warm tone (y,y,0) + beta kd [default: the scene's, else 0.4,0.4,0.2,0.6].
+    #[arg(
+        long,
+        value_name = "B,Y,ALPHA,BETA",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    gooch: Option<Vec<f32>>,
+    /// Draw feature lines found by ray casting over the image: silhouettes,
+    /// creases, borders of open meshes and material boundaries, also in
+    /// mirrors and through glass (on by default when the scene's [settings]
+    /// have a `lines` table, or with any other line option).
+    #[arg(long)]
+    lines: bool,
+    /// Line width in pixels, more than 0 and at most 16 [default: the
+    /// scene's, else 1]. Implies --lines.
+    #[arg(long, value_name = "PX", allow_hyphen_values = true)]
+    line_width: Option<f32>,
+    /// Line colour as R,G,B in [0, 1] (display values for PNG) [default: the
+    /// scene's, else 0,0,0]. Implies --lines.
+    #[arg(
+        long,
+        value_name = "R,G,B",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    line_color: Option<Vec<f32>>,
+    /// Crease angle in degrees, 0 to 180: neighbouring normals of one object
+    /// deviating by more than this make a crease line; 180 draws no creases
+    /// [default: the scene's, else 45.57, Blender Freestyle's]. Implies --lines.
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+    crease_angle: Option<f32>,
+    /// Also write the lines of the scene's meshes as vectors to FILE.svg:
+    /// silhouette, crease and border edges, split where their visibility
+    /// changes (decided by casting rays), projected and clipped to the image.
+    #[arg(long, value_name = "FILE")]
+    lines_svg: Option<PathBuf>,
+    /// In the SVG, also draw hidden segments, dashed (by default hidden
+    /// segments are left out).
+    #[arg(long, requires = "lines_svg")]
+    hidden_lines: bool,
     /// Where the single-precision frame the kernels work in is centred:
     /// at the camera (precision follows the distance to the camera,
     /// whatever the distance to the world origin), or at the world origin
@@ -104,6 +154,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let wall = Instant::now();
     // Fail on a bad output name before spending time on the render.
     OutputFormat::from_path(&args.output)?;
+    if let Some(svg) = &args.lines_svg {
+        vector::check_svg_path(svg)?;
+    }
     if let Some(s) = &args.stats
         && s.extension().and_then(|e| e.to_str()) != Some("json")
     {
@@ -141,7 +194,50 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     }
 
     let s = &desc.settings;
+    if let Some(g) = &args.gooch
+        && g.len() != 4
+    {
+        return Err(Error::Invalid(format!(
+            "--gooch takes four numbers b,y,alpha,beta, got {}",
+            g.len()
+        )));
+    }
+    if let Some(c) = &args.line_color
+        && c.len() != 3
+    {
+        return Err(Error::Invalid(format!(
+            "--line-color takes three numbers r,g,b, got {}",
+            c.len()
+        )));
+    }
+    let gooch = args.gooch.as_ref().map(|g| GoochParams {
+        b: g[0],
+        y: g[1],
+        alpha: g[2],
+        beta: g[3],
+    });
+    let lines_asked = args.lines
+        || args.line_width.is_some()
+        || args.line_color.is_some()
+        || args.crease_angle.is_some();
+    let lines = match (lines_asked, s.lines) {
+        (false, scene) => scene,
+        (true, scene) => {
+            let base = scene.unwrap_or_default();
+            Some(LineSettings {
+                width: args.line_width.unwrap_or(base.width),
+                color: args
+                    .line_color
+                    .as_ref()
+                    .map_or(base.color, |c| [c[0], c[1], c[2]]),
+                crease_degrees: args.crease_angle.unwrap_or(base.crease_degrees),
+            })
+        }
+    };
     let settings = SettingsDesc {
+        style: args.style.map(Into::into),
+        gooch,
+        lines,
         min_contribution: args.min_contribution.min_contribution,
         seed: args.seed.seed,
         transport: args.transport.get(),
@@ -178,9 +274,12 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         )));
     }
     let light_count = desc.lights.len();
+    let camera = desc.cameras[args.camera].clone();
 
+    // The line stage reports its rows on the same bar.
+    let passes = 1 + settings.lines.is_some() as u64;
     let bar = progress_bar(
-        settings.height as u64,
+        settings.height as u64 * passes,
         args.quiet,
         "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
     );
@@ -227,7 +326,21 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let Some(film) = &frame.film else {
         return Err(Error::Invalid("the renderer produced no image".into()));
     };
-    prism::image::output::write_image(&args.output, film, &png)?;
+    prism::image::output::write_image_with_lines(&args.output, film, frame.lines.as_ref(), &png)?;
+    if let Some(svg) = &args.lines_svg {
+        let scene = accel
+            .scene
+            .as_ref()
+            .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
+        vector::write_svg(
+            svg,
+            scene,
+            &camera,
+            &settings,
+            args.hidden_lines,
+            args.quiet,
+        )?;
+    }
 
     let rays = frame.counters.rays;
     let render_seconds = frame.render_seconds;
@@ -253,6 +366,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         primitives,
         lights: light_count,
         nonfinite_samples: frame.counters.nonfinite_samples,
+        line_seconds: frame.lines.as_ref().map(|_| frame.line_seconds),
+        line_rays: frame.lines.as_ref().map(|_| frame.line_rays),
         wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,

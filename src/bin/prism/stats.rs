@@ -68,6 +68,12 @@ pub struct RenderStats {
     pub lights: usize,
     /// Samples that were NaN or infinite, kept out of the image.
     pub nonfinite_samples: u64,
+    /// Seconds of the feature-line stage, when lines were drawn.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line_seconds: Option<f64>,
+    /// Rays cast by the feature-line stage (not in `rays`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line_rays: Option<u64>,
     /// Wavefront only: time per stage and queue memory.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wavefront: Option<WavefrontStatsJson>,

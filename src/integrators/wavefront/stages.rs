@@ -9,7 +9,7 @@
 use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
-use crate::core::settings::{RenderSettings, Transport};
+use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
 use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
@@ -23,6 +23,7 @@ use crate::integrators::{accumulate, film_sample};
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
+use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
@@ -181,7 +182,12 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
         if it.surface.emission != Color::ZERO {
             out.emit(h.path, h.throughput * it.surface.emission);
         }
-        if LIT && it.is_lit_by_lights() {
+        if LIT && it.is_lit_by_lights() && settings.style == Style::Gooch {
+            out.emit(
+                h.path,
+                h.throughput * gooch_shade(&settings.gooch, scene.lights(), it),
+            );
+        } else if LIT && it.is_lit_by_lights() {
             for light in scene.lights() {
                 if let Some(q) = direct_light(it, light) {
                     out.push_shadow(h, q);
