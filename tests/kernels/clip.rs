@@ -145,7 +145,7 @@ fn seg_cross_x(a: DVec2, b: DVec2, c: DVec2, d: DVec2) -> Option<f64> {
     }
     let t = (c - a).perp_dot(s) / den;
     let u = (c - a).perp_dot(r) / den;
-    ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then(|| a.x + r.x * t)
+    ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then_some(a.x + r.x * t)
 }
 
 /// Area of `subject` (simple) inside the convex `clip`, by integrating
