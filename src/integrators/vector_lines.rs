@@ -243,11 +243,23 @@ fn edge_segments(
     }
     let (fa, za) = proj.project(a);
     let (fb, zb) = proj.project(b);
-    let Some((s0, s1)) = clip_segment(fa, fb, Vec2::ZERO, size) else {
+    let Some((c0, c1)) = clip_segment(fa, fb, Vec2::ZERO, size) else {
         return;
     };
-    // World point whose projection is at film parameter `s` (perspective
-    // correct: 1/depth is linear on the film).
+    // World point whose projection is at film parameter `s` of `fa..fb`
+    // (perspective correct: 1/depth is linear on the film).
+    let at_full = |s: f32| {
+        let u = (s / zb) / ((1.0 - s) / za + s / zb);
+        a + (b - a) * u
+    };
+    // Continue with the piece inside the image only: an edge cut at the
+    // near plane can project millions of pixels long, and parameters and
+    // film positions along it would keep the precision of that length
+    // (pieces pixels off, bisection that never reaches 1/64 pixel).
+    let (a, b) = (at_full(c0), at_full(c1));
+    let (fa, za) = proj.project(a);
+    let (fb, zb) = proj.project(b);
+    let (s0, s1) = (0.0f32, 1.0f32);
     let at = |s: f32| {
         let u = (s / zb) / ((1.0 - s) / za + s / zb);
         a + (b - a) * u
@@ -265,8 +277,15 @@ fn edge_segments(
         if v != prev_v {
             // Bisect to 1/64 pixel.
             let (mut lo, mut hi) = (prev_s, s);
-            while (hi - lo) * (fb - fa).length() > 1.0 / 64.0 {
+            // At most 40 halvings, and never past adjacent floats.
+            for _ in 0..40 {
+                if (hi - lo) * (fb - fa).length() <= 1.0 / 64.0 {
+                    break;
+                }
                 let mid = 0.5 * (lo + hi);
+                if mid <= lo || mid >= hi {
+                    break;
+                }
                 if visible(scene, eye, at(mid), rays) == prev_v {
                     lo = mid;
                 } else {

@@ -941,3 +941,48 @@ fn borders_of_an_open_mesh_are_lines_in_pixels_and_in_the_svg() {
         assert!((drawn - want).abs() < 0.5, "{e:?}: {drawn} of {want}");
     }
 }
+
+/// Edges that run behind the camera (the camera inside a room, next to an
+/// edge that passes beside and behind it) are cut at the near plane: every
+/// SVG piece lies inside the image and on the projection of its own world
+/// points (within 1/50 pixel). The visibility search now works on the
+/// piece inside the image and stops after 40 halvings; before, it worked
+/// along the unclipped projection (which can be millions of pixels long)
+/// and could in principle bisect forever, though this scene did not make
+/// it do so.
+#[test]
+fn svg_lines_of_a_room_seen_from_inside_stay_on_their_edges() {
+    let room = r#"
+[camera]
+look_from = [4.0, 2.0, 0.0]
+look_at = [4.6, 2.6, -3.0]
+vfov = 40
+[[lights]]
+type = "point"
+position = [0, 2, 0]
+intensity = 50
+[[objects]]
+name = "room"
+shape = { type = "mesh", positions = [[-5, -3, -5], [5, -3, -5], [-5, 3, -5], [5, 3, -5], [-5, -3, 5], [5, -3, 5], [-5, 3, 5], [5, 3, 5]], indices = [[0, 6, 4], [0, 2, 6], [1, 7, 3], [1, 5, 7], [0, 5, 1], [0, 4, 5], [2, 7, 6], [2, 3, 7], [0, 3, 2], [0, 1, 3], [4, 7, 5], [4, 6, 7]] }
+"#;
+    let (w, h) = (320, 240);
+    let (v, scene) = vectors(room, w, h);
+    assert!(!v.segments.is_empty(), "the room's edges are in view");
+    let desc = load_toml(room).unwrap();
+    let rays = CameraRays::relative_to(&desc.cameras[0], scene.origin(), w, h);
+    let proj = rays.projection();
+    let o = scene.origin().as_vec3a();
+    for s in &v.segments {
+        for (film, world) in [(s.a, s.world[0]), (s.b, s.world[1])] {
+            assert!(
+                film.x >= -0.5
+                    && film.x <= w as f32 + 0.5
+                    && film.y >= -0.5
+                    && film.y <= h as f32 + 0.5,
+                "{film} outside the image"
+            );
+            let (p, z) = proj.project(world - o);
+            assert!(z > 0.0 && (p - film).length() < 0.02, "{film} vs {p}");
+        }
+    }
+}
