@@ -10,11 +10,14 @@ pub mod scene_file;
 use std::path::Path;
 
 use crate::core::error::{Error, Result};
-use crate::geometry::mesh::BuildQuality;
+use crate::geometry::mesh::BuildOptions;
 use crate::io::desc::SceneDesc;
 
-/// Loads a scene file of any supported kind.
-pub fn load(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+/// Loads a scene file of any supported kind. `options` is a
+/// [`crate::geometry::mesh::BuildQuality`] or [`BuildOptions`] (which also
+/// names the structure over mesh triangles).
+pub fn load(path: &Path, options: impl Into<BuildOptions>) -> Result<SceneDesc> {
+    let quality = options.into();
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
