@@ -36,6 +36,26 @@ impl BuildQuality {
     }
 }
 
+/// How meshes are built: the BVH preset, and the structure (`None`: the
+/// scene file's `[settings] accel`, else the BVH). A plain
+/// [`BuildQuality`] converts into options with no structure named.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct BuildOptions {
+    /// obvhs preset of mesh BVHs.
+    pub quality: BuildQuality,
+    /// Structure over each mesh's triangles.
+    pub accel: Option<crate::core::settings::Accel>,
+}
+
+impl From<BuildQuality> for BuildOptions {
+    fn from(quality: BuildQuality) -> Self {
+        Self {
+            quality,
+            accel: None,
+        }
+    }
+}
+
 /// Pads a box by a few ulps of its magnitude so the BVH's box test never
 /// rejects a ray the watertight triangle test would accept.
 pub fn padded_aabb(min: Vec3A, max: Vec3A) -> Aabb {

@@ -6,6 +6,9 @@
 
 pub mod build;
 pub mod bvh8;
+pub mod grid;
+pub mod kdtree;
+pub mod mailbox;
 pub mod node;
 pub mod packet;
 pub mod simd;

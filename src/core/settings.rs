@@ -204,6 +204,41 @@ impl Transport {
     }
 }
 
+/// The acceleration structure over each mesh's triangles. All four give
+/// the same hits (the same watertight triangle test, the same closest-`t`
+/// rule, equal `t` going to the lower input triangle index); they differ
+/// in build time, memory and speed.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Accel {
+    /// Prism's 8-wide BVH (built by obvhs), the default.
+    #[default]
+    Bvh,
+    /// A kd-tree: SAH over exactly clipped triangle bounds.
+    Kdtree,
+    /// A uniform grid walked by a 3D DDA.
+    Grid,
+    /// No structure: every triangle is tested (the reference).
+    Brute,
+}
+
+impl Accel {
+    /// Every structure, the default first.
+    pub const ALL: [Accel; 4] = [Accel::Bvh, Accel::Kdtree, Accel::Grid, Accel::Brute];
+
+    /// Lower-case name, as on the command line and in scene files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Accel::Bvh => "bvh",
+            Accel::Kdtree => "kdtree",
+            Accel::Grid => "grid",
+            Accel::Brute => "brute",
+        }
+    }
+}
+
 /// Default bounce from which Russian roulette may end a path: the first
 /// bounces carry most of the image and are always traced.
 pub const DEFAULT_RR_START_DEPTH: u32 = 3;

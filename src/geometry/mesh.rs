@@ -9,12 +9,16 @@ use rayon::prelude::*;
 
 use crate::accel::build::padded_aabb;
 /// Re-exported: a mesh is built with one of these presets.
-pub use crate::accel::build::{BuildQuality, MAX_COORDINATE};
+pub use crate::accel::build::{BuildOptions, BuildQuality, MAX_COORDINATE};
 use crate::accel::bvh8::{Bvh8, MAX_LEAF};
+use crate::accel::grid::Grid;
+use crate::accel::kdtree::KdTree;
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
 use crate::accel::single::traverse;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
+/// Re-exported: the structure a mesh is built with.
+pub use crate::core::settings::Accel;
 use crate::geometry::triangle::Tri4;
 /// Re-exported: the triangle test meshes use.
 pub use crate::geometry::triangle::WatertightRay;
@@ -43,10 +47,29 @@ pub struct MeshData {
     pub indices: Vec<[u32; 3]>,
 }
 
-/// A triangle mesh in object space, with a BVH over its triangles.
+/// The structure of a [`Mesh`] other than its BVH.
+#[derive(Debug)]
+enum Structure {
+    /// [`Mesh::bvh`] (empty otherwise).
+    Bvh,
+    Grid(Grid),
+    KdTree(KdTree),
+    Brute,
+}
+
+/// A triangle mesh in object space, with an acceleration structure over
+/// its triangles ([`Accel`]: the BVH by default).
 ///
-/// Triangles are stored in BVH leaf order so traversal reads them without
-/// an indirection; [`MeshHit::triangle`] indexes that order.
+/// With the BVH, triangles are stored in BVH leaf order so traversal reads
+/// them without an indirection (each leaf's in input order); otherwise in
+/// input order. [`MeshHit::triangle`] indexes that order and
+/// [`Mesh::input_triangle`] maps it back to the input.
+///
+/// **Closest hit, equal `t`.** Every structure and brute force return the
+/// hit of smallest `t`; of several hits with the same `t` (a ray through a
+/// shared edge or vertex of coplanar triangles, which the watertight test
+/// gives to each of them), the one of lowest *input* triangle index. So
+/// all structures report the same triangle, bit for bit.
 #[derive(Debug)]
 pub struct Mesh {
     /// Name for messages.
@@ -63,7 +86,8 @@ pub struct Mesh {
     /// triangles `bvh.leaves[i].first ..` in BVH order).
     blocks: Vec<Tri4>,
     bounds: (Vec3A, Vec3A),
-    /// Seconds spent building the BVH.
+    structure: Structure,
+    /// Seconds spent building the acceleration structure.
     pub build_seconds: f64,
 }
 
@@ -106,6 +130,18 @@ impl Mesh {
         data: MeshData,
         mode: NormalMode,
         quality: BuildQuality,
+    ) -> Result<Self, String> {
+        Self::with_accel(name, data, mode, quality, Accel::Bvh)
+    }
+
+    /// [`Mesh::new`] with the structure `accel` instead of the BVH
+    /// (`quality` applies to the BVH only). No other structure is built.
+    pub fn with_accel(
+        name: impl Into<String>,
+        data: MeshData,
+        mode: NormalMode,
+        quality: BuildQuality,
+        accel: Accel,
     ) -> Result<Self, String> {
         let name = name.into();
         let n = data.positions.len();
@@ -165,17 +201,30 @@ impl Mesh {
         };
 
         let start = Instant::now();
-        // The per-triangle passes run on the worker threads, like the build.
-        let boxes: Vec<Aabb> = data
-            .indices
-            .par_iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| positions[i as usize]);
-                padded_aabb(a.min(b).min(c), a.max(b).max(c))
-            })
-            .collect();
-        let bvh = Bvh8::build(&boxes, quality.params(), MAX_LEAF);
-        MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let bvh = if accel == Accel::Bvh {
+            // The per-triangle passes run on the worker threads, like the build.
+            let boxes: Vec<Aabb> = data
+                .indices
+                .par_iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| positions[i as usize]);
+                    padded_aabb(a.min(b).min(c), a.max(b).max(c))
+                })
+                .collect();
+            let mut bvh = Bvh8::build(&boxes, quality.params(), MAX_LEAF);
+            MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            // Each leaf's triangles in input order: of equal-t hits in one
+            // leaf block the first lane, hence the lowest input index, wins.
+            for l in &bvh.leaves {
+                bvh.prims[l.first as usize..(l.first + l.count) as usize].sort_unstable();
+            }
+            bvh
+        } else {
+            Bvh8 {
+                prims: (0..data.indices.len() as u32).collect(),
+                ..Bvh8::default()
+            }
+        };
         let triangles: Vec<[u32; 3]> = bvh
             .prims
             .par_iter()
@@ -195,6 +244,17 @@ impl Mesh {
                 )
             })
             .collect();
+        let structure = match accel {
+            Accel::Bvh => Structure::Bvh,
+            Accel::Grid => Structure::Grid(Grid::build(
+                &corners
+                    .iter()
+                    .map(|[a, b, c]| (a.min(*b).min(*c), a.max(*b).max(*c)))
+                    .collect::<Vec<_>>(),
+            )),
+            Accel::Kdtree => Structure::KdTree(KdTree::build(&corners)),
+            Accel::Brute => Structure::Brute,
+        };
         let build_seconds = start.elapsed().as_secs_f64();
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
@@ -214,6 +274,7 @@ impl Mesh {
             bvh,
             blocks,
             bounds: (lo, hi),
+            structure,
             build_seconds,
         })
     }
@@ -246,6 +307,105 @@ impl Mesh {
         })
     }
 
+    /// The structure the mesh was built with.
+    pub fn accel(&self) -> Accel {
+        match self.structure {
+            Structure::Bvh => Accel::Bvh,
+            Structure::Grid(_) => Accel::Grid,
+            Structure::KdTree(_) => Accel::Kdtree,
+            Structure::Brute => Accel::Brute,
+        }
+    }
+
+    /// The grid, when built with [`Accel::Grid`].
+    pub fn grid(&self) -> Option<&Grid> {
+        match &self.structure {
+            Structure::Grid(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The kd-tree, when built with [`Accel::Kdtree`].
+    pub fn kdtree(&self) -> Option<&KdTree> {
+        match &self.structure {
+            Structure::KdTree(k) => Some(k),
+            _ => None,
+        }
+    }
+
+    /// The BVH (empty unless built with [`Accel::Bvh`]).
+    pub fn bvh(&self) -> &Bvh8 {
+        &self.bvh
+    }
+
+    /// Bytes of the acceleration structure: nodes, leaves and triangle
+    /// blocks for the BVH, cells or nodes and triangle lists for the
+    /// others (the triangles themselves not counted).
+    pub fn accel_bytes(&self) -> usize {
+        use std::mem::size_of;
+        match &self.structure {
+            Structure::Bvh => {
+                self.bvh.nodes.len() * size_of::<crate::accel::bvh8::Node8>()
+                    + self.bvh.leaves.len() * size_of::<crate::accel::bvh8::Leaf>()
+                    + self.bvh.prims.len() * 4
+                    + self.blocks.len() * size_of::<Tri4>()
+            }
+            Structure::Grid(g) => g.bytes(),
+            Structure::KdTree(k) => k.bytes(),
+            Structure::Brute => 0,
+        }
+    }
+
+    /// True if a hit on triangle `tri` at `t` replaces `best`: nearer, or
+    /// as near with a lower input index.
+    #[inline(always)]
+    fn wins(&self, t: f32, tri: u32, best: &Option<MeshHit>) -> bool {
+        match best {
+            None => true,
+            Some(b) => {
+                t < b.t
+                    || (t == b.t
+                        && self.bvh.prims[tri as usize] < self.bvh.prims[b.triangle as usize])
+            }
+        }
+    }
+
+    /// The upper end of the search for a triangle that may still replace
+    /// `best` when the search is bounded by `t_max`: one ulp more once a
+    /// hit is known, so that an equal `t` is found and can win on index.
+    #[inline(always)]
+    fn reach(t_max: f32, best: &Option<MeshHit>) -> f32 {
+        if best.is_some() {
+            t_max.next_up()
+        } else {
+            t_max
+        }
+    }
+
+    /// Triangle `i` (stored order) if it replaces `best`.
+    #[inline(always)]
+    fn test_one(
+        &self,
+        wt: &WatertightRay,
+        i: u32,
+        t_min: f32,
+        t_max: f32,
+        best: &mut Option<MeshHit>,
+    ) -> Option<f32> {
+        let [p0, p1, p2] = self.corners[i as usize];
+        let (t, b1, b2) = wt.intersect(p0, p1, p2, t_min, Self::reach(t_max, best))?;
+        if !self.wins(t, i, best) {
+            return None;
+        }
+        *best = Some(MeshHit {
+            t,
+            triangle: i,
+            b1,
+            b2,
+        });
+        Some(t)
+    }
+
     /// Closest hit with `t` in `(t_min, t_max)`.
     #[inline(always)]
     pub(crate) fn intersect_kernel<const AVX: bool>(
@@ -256,11 +416,29 @@ impl Mesh {
     ) -> Option<MeshHit> {
         let wt = WatertightRay::new(ray);
         let mut best: Option<MeshHit> = None;
-        traverse::<AVX>(&self.bvh, ray, t_min, t_max, false, |leaf, t_max| {
-            let hit = self.leaf_hit(&wt, leaf, t_min, t_max)?;
-            best = Some(hit);
-            Some(hit.t)
-        });
+        match &self.structure {
+            Structure::Bvh => {
+                traverse::<AVX>(&self.bvh, ray, t_min, t_max, false, |leaf, t_max| {
+                    let hit = self.leaf_hit(&wt, leaf, t_min, Self::reach(t_max, &best))?;
+                    if !self.wins(hit.t, hit.triangle, &best) {
+                        return None;
+                    }
+                    best = Some(hit);
+                    Some(hit.t)
+                });
+            }
+            Structure::Grid(g) => {
+                g.traverse(ray, t_min, t_max, false, |i, t_max| {
+                    self.test_one(&wt, i, t_min, t_max, &mut best)
+                });
+            }
+            Structure::KdTree(k) => {
+                k.traverse(ray, t_min, t_max, false, |i, t_max| {
+                    self.test_one(&wt, i, t_min, t_max, &mut best)
+                });
+            }
+            Structure::Brute => return self.intersect_brute_force(ray, t_min, t_max),
+        }
         best
     }
 
@@ -274,11 +452,25 @@ impl Mesh {
         lanes: LaneMask,
         best: &mut [Option<MeshHit>; LANES],
     ) {
+        if !matches!(self.structure, Structure::Bvh) {
+            for_each_lane(lanes, |l| {
+                if let Some(h) =
+                    self.intersect_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l])
+                {
+                    packet.t_max[l] = h.t;
+                    best[l] = Some(h);
+                }
+            });
+            return;
+        }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
         crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
             for_each_lane(hit, |l| {
-                if let Some(h) = self.leaf_hit(&wt[l], leaf, p.t_min[l], p.t_max[l]) {
+                let reach = Self::reach(p.t_max[l], &best[l]);
+                if let Some(h) = self.leaf_hit(&wt[l], leaf, p.t_min[l], reach)
+                    && self.wins(h.t, h.triangle, &best[l])
+                {
                     p.t_max[l] = h.t;
                     best[l] = Some(h);
                 }
@@ -295,6 +487,15 @@ impl Mesh {
         packet: &mut Packet,
         lanes: LaneMask,
     ) -> LaneMask {
+        if !matches!(self.structure, Structure::Bvh) {
+            let mut blocked = 0;
+            for_each_lane(lanes, |l| {
+                if self.occluded_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l]) {
+                    blocked |= 1 << l;
+                }
+            });
+            return blocked;
+        }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
         let mut blocked = 0;
@@ -326,13 +527,23 @@ impl Mesh {
         best: &mut Vec<Option<MeshHit>>,
     ) {
         wt.clear();
-        wt.extend(stream.rays.iter().map(WatertightRay::new));
         best.clear();
         best.resize(stream.len(), None);
+        if !matches!(self.structure, Structure::Bvh) {
+            for (r, b) in best.iter_mut().enumerate() {
+                *b =
+                    self.intersect_kernel::<AVX>(&stream.rays[r], stream.t_min[r], stream.t_max[r]);
+            }
+            return;
+        }
+        wt.extend(stream.rays.iter().map(WatertightRay::new));
         crate::accel::stream::traverse::<AVX>(&self.bvh, stream, |leaf, ids, s| {
             for &r in ids {
                 let r = r as usize;
-                if let Some(h) = self.leaf_hit(&wt[r], leaf, s.t_min[r], s.t_max[r]) {
+                let reach = Self::reach(s.t_max[r], &best[r]);
+                if let Some(h) = self.leaf_hit(&wt[r], leaf, s.t_min[r], reach)
+                    && self.wins(h.t, h.triangle, &best[r])
+                {
                     s.t_max[r] = h.t;
                     best[r] = Some(h);
                 }
@@ -385,25 +596,40 @@ impl Mesh {
         ) -> () => Mesh, intersect_stream_kernel
     }
 
+    /// The vertex indices of every triangle in input order: with
+    /// [`Mesh::positions`], the mesh's input again (to rebuild it with
+    /// another structure).
+    pub fn input_indices(&self) -> Vec<[u32; 3]> {
+        let mut out = vec![[0; 3]; self.triangles.len()];
+        for (i, t) in self.triangles.iter().enumerate() {
+            out[self.bvh.prims[i] as usize] = *t;
+        }
+        out
+    }
+
+    /// [`Mesh::input_indices`] with the positions, as loader input.
+    pub fn input_data(&self) -> MeshData {
+        MeshData {
+            positions: self.positions.iter().map(|&p| p.into()).collect(),
+            indices: self.input_indices(),
+            ..MeshData::default()
+        }
+    }
+
     /// The position of triangle `i` (BVH order) in the input's indices.
     pub fn input_triangle(&self, i: usize) -> u32 {
         self.bvh.prims[i]
     }
 
-    /// Closest hit by testing every triangle: the reference for BVH tests.
+    /// Closest hit by testing every triangle (equal `t` to the lowest
+    /// input index): the reference for the structures' tests.
     pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<MeshHit> {
         let wt = WatertightRay::new(ray);
         let mut best = None;
-        let mut t_max = t_max;
-        for (i, [p0, p1, p2]) in self.corners.iter().enumerate() {
-            if let Some((t, b1, b2)) = wt.intersect(*p0, *p1, *p2, t_min, t_max) {
-                t_max = t;
-                best = Some(MeshHit {
-                    t,
-                    triangle: i as u32,
-                    b1,
-                    b2,
-                });
+        let mut bound = t_max;
+        for i in 0..self.corners.len() as u32 {
+            if let Some(t) = self.test_one(&wt, i, t_min, bound, &mut best) {
+                bound = t;
             }
         }
         best
@@ -419,9 +645,18 @@ impl Mesh {
         t_max: f32,
     ) -> bool {
         let wt = WatertightRay::new(ray);
-        traverse::<AVX>(&self.bvh, ray, t_min, t_max, true, |leaf, t_max| {
-            self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t)
-        })
+        let tri = |i: u32, t_max: f32| {
+            let [p0, p1, p2] = self.corners[i as usize];
+            wt.intersect(p0, p1, p2, t_min, t_max).map(|h| h.0)
+        };
+        match &self.structure {
+            Structure::Bvh => traverse::<AVX>(&self.bvh, ray, t_min, t_max, true, |leaf, t_max| {
+                self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t)
+            }),
+            Structure::Grid(g) => g.traverse(ray, t_min, t_max, true, tri),
+            Structure::KdTree(k) => k.traverse(ray, t_min, t_max, true, tri),
+            Structure::Brute => (0..self.corners.len() as u32).any(|i| tri(i, t_max).is_some()),
+        }
     }
 
     /// Normals and texture coordinates at a hit.

@@ -70,6 +70,9 @@ pub struct SettingsDesc {
     pub light_samples: Option<u32>,
     /// Russian roulette start depth; `Some(None)` turns it off.
     pub rr_start_depth: Option<Option<u32>>,
+    /// Structure over mesh triangles asked for by the file (applied when
+    /// it was loaded; kept for reporting).
+    pub accel: Option<crate::core::settings::Accel>,
     /// Shading style.
     pub style: Option<crate::core::settings::Style>,
     /// Gooch parameters.

@@ -10,11 +10,14 @@ pub mod scene_file;
 use std::path::Path;
 
 use crate::core::error::{Error, Result};
-use crate::geometry::mesh::BuildQuality;
+use crate::geometry::mesh::BuildOptions;
 use crate::io::desc::SceneDesc;
 
-/// Loads a scene file of any supported kind.
-pub fn load(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+/// Loads a scene file of any supported kind. `options` is a
+/// [`crate::geometry::mesh::BuildQuality`] or [`BuildOptions`] (which also
+/// names the structure over mesh triangles).
+pub fn load(path: &Path, options: impl Into<BuildOptions>) -> Result<SceneDesc> {
+    let quality = options.into();
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -40,10 +43,13 @@ thread_local! {
 /// files, their buffers and textures), in the order they were read, each
 /// as its length and bytes. Paths do not enter it, so a copied scene
 /// folder hashes the same; an edit to any of its files does not.
-pub fn load_with_digest(path: &Path, quality: BuildQuality) -> Result<(SceneDesc, String)> {
+pub fn load_with_digest(
+    path: &Path,
+    options: impl Into<BuildOptions>,
+) -> Result<(SceneDesc, String)> {
     use sha2::Digest;
     SOURCES.with(|s| *s.borrow_mut() = Some(sha2::Sha256::new()));
-    let result = load(path, quality);
+    let result = load(path, options);
     let digest = SOURCES
         .with(|s| s.borrow_mut().take())
         .expect("set above")

@@ -15,7 +15,7 @@ use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
-use crate::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode};
+use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
 use crate::image::output::srgb_to_linear;
@@ -55,6 +55,8 @@ struct FileSettings {
     light_samples: Option<u32>,
     /// Russian roulette start depth; `false` turns it off.
     russian_roulette: Option<FileRoulette>,
+    /// Structure over mesh triangles: bvh, kdtree, grid or brute.
+    accel: Option<crate::core::settings::Accel>,
     /// `"shaded"` or `"gooch"`.
     style: Option<FileStyle>,
     /// Gooch parameters (each optional).
@@ -318,7 +320,7 @@ struct FileInclude {
 }
 
 /// Loads a TOML scene file (see the README for the schema).
-pub fn load_scene_file(path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+pub fn load_scene_file(path: &Path, quality: impl Into<BuildOptions>) -> Result<SceneDesc> {
     let bytes = crate::io::read_regular_file(path)
         .map_err(|e| Error::load(path, format!("cannot read scene file: {e}")))?;
     let text = String::from_utf8(bytes)
@@ -330,9 +332,18 @@ pub fn load_scene_file(path: &Path, quality: BuildQuality) -> Result<SceneDesc> 
 /// and its folder is where relative paths (textures, included glTF files)
 /// are looked up; it is not read itself. This is the entry point of the
 /// scene-format fuzz target (`fuzz/`).
-pub fn parse_scene_file(text: &str, path: &Path, quality: BuildQuality) -> Result<SceneDesc> {
+///
+/// Meshes (and included glTF files) are built with `quality`'s structure,
+/// else the file's `[settings] accel`, else the BVH.
+pub fn parse_scene_file(
+    text: &str,
+    path: &Path,
+    quality: impl Into<BuildOptions>,
+) -> Result<SceneDesc> {
     let file: FileScene =
         toml::from_str(text).map_err(|e| Error::load(path, format!("invalid scene file: {e}")))?;
+    let mut quality = quality.into();
+    quality.accel = Some(quality.accel.or(file.settings.accel).unwrap_or_default());
     let base = path.parent().unwrap_or(Path::new("."));
     let ctx = Ctx {
         path,
@@ -345,7 +356,7 @@ pub fn parse_scene_file(text: &str, path: &Path, quality: BuildQuality) -> Resul
 struct Ctx<'a> {
     path: &'a Path,
     base: &'a Path,
-    quality: BuildQuality,
+    quality: BuildOptions,
 }
 
 /// A finite point or vector of the file, in double precision (world
@@ -512,6 +523,7 @@ impl Ctx<'_> {
                 FileRoulette::Enabled(false) => None,
                 FileRoulette::StartDepth(d) => Some(d),
             }),
+            accel: s.accel,
             style: s.style.map(|t| match t {
                 FileStyle::Shaded => crate::core::settings::Style::Shaded,
                 FileStyle::Gooch => crate::core::settings::Style::Gooch,
@@ -728,7 +740,13 @@ impl Ctx<'_> {
                     NormalMode::Flat
                 };
                 let name = o.name.clone().unwrap_or_else(|| "mesh".into());
-                let mesh = Mesh::new(name, data, mode, self.quality)?;
+                let mesh = Mesh::with_accel(
+                    name,
+                    data,
+                    mode,
+                    self.quality.quality,
+                    self.quality.accel.unwrap_or_default(),
+                )?;
                 return Ok(ObjectDesc {
                     name: o.name.clone(),
                     transform: self.placement(&o.placement)?,

@@ -285,6 +285,67 @@ fn bench_compares_both_integrators_as_json() {
     }
 }
 
+/// `--accel` and `[settings] accel`: every structure renders the same
+/// image bit for bit (a small mesh scene); the scene file's choice is
+/// used and reported, the command line overrides it, and a bad name is a
+/// clean error.
+#[test]
+fn every_accel_renders_the_same_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("knot.toml");
+    std::fs::write(
+        &scene,
+        r#"
+[settings]
+width = 40
+height = 30
+accel = "kdtree"
+[camera]
+look_from = [0, 0.5, 4]
+look_at = [0, 0, 0]
+[[objects]]
+shape = { type = "torus_knot", radius = 1.0, tube = 0.3, segments = 64, sides = 8 }
+material = { color = 0.7, mirror = 0.3 }
+[[objects]]
+shape = { type = "plane" }
+translate = [0, -1.5, 0]
+[[lights]]
+type = "point"
+position = [2, 3, 4]
+intensity = 40
+"#,
+    )
+    .unwrap();
+    let mut images = Vec::new();
+    for accel in [None, Some("bvh"), Some("grid"), Some("brute")] {
+        let out = dir.path().join(format!("{}.exr", accel.unwrap_or("file")));
+        let stats = dir.path().join(format!("{}.json", accel.unwrap_or("file")));
+        let mut extra = vec!["--stats", stats.to_str().unwrap()];
+        if let Some(a) = accel {
+            extra.extend(["--accel", a]);
+        }
+        assert_success(&render(&scene, &out, &extra));
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        assert_eq!(json["accel"], accel.unwrap_or("kdtree"), "{json}");
+        if accel != Some("brute") {
+            assert!(json["accel_bytes"].as_u64().unwrap() > 0);
+        }
+        images.push(std::fs::read(&out).unwrap());
+    }
+    for (k, img) in images.iter().enumerate().skip(1) {
+        assert!(img == &images[0], "image {k} differs from the kd-tree's");
+    }
+    let out = dir.path().join("bad.png");
+    let bad = render(&scene, &out, &["--accel", "octree"]);
+    assert_eq!(bad.status.code(), Some(2), "usage error");
+    assert!(!out.exists());
+    let bad_scene = dir.path().join("bad.toml");
+    std::fs::write(&bad_scene, "[settings]\naccel = \"octree\"\n").unwrap();
+    let out = dir.path().join("bad2.png");
+    assert_clean_failure(&render(&bad_scene, &out, &[]), &out, &["accel"]);
+}
+
 #[test]
 fn illustration_options_reject_bad_input_cleanly() {
     let dir = tempfile::tempdir().unwrap();

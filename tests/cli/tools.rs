@@ -196,7 +196,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
 }
 
 const HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel";
 
 fn tradeoff(out: &Path, extra: &[&str]) -> Output {
     prism()
@@ -249,8 +249,8 @@ fn tradeoff_writes_the_csv_and_plots() {
     assert_eq!(lines[0], HEADER);
     // The base, then every knob's values but the base's: spp 6 of 7, depth
     // 6 of 7, threshold 5 of 6, light samples 3 of 4, roulette 2 of 3,
-    // BVH 5 of 6, transport 1 of 2, sampler 1 of 2.
-    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 2 + 5 + 1 + 1);
+    // BVH 5 of 6, transport 1 of 2, sampler 1 of 2, accel 2 of 3.
+    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 2 + 5 + 1 + 1 + 2);
     assert!(lines[1].starts_with("base,,path,16,8,0.001,1,3,medium,recursive,"));
     let knobs: Vec<&str> = lines[1..]
         .iter()
@@ -265,22 +265,24 @@ fn tradeoff_writes_the_csv_and_plots() {
         "bvh",
         "transport",
         "sampler",
+        "accel",
     ] {
         assert!(knobs.contains(&k), "no {k} rows");
     }
     for l in &lines[1..] {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 15, "{l}");
+        assert_eq!(f.len(), 16, "{l}");
         let spp: u64 = f[3].parse().unwrap();
         let seconds: f64 = f[10].parse().unwrap();
         let rays: u64 = f[11].parse().unwrap();
         assert!(seconds >= 0.0 && seconds.is_finite(), "{l}");
         // At least one camera ray per pixel sample.
         assert!(rays >= 64 * spp, "{l}");
-        for m in &f[12..] {
+        for m in &f[12..15] {
             let m: f64 = m.parse().unwrap();
             assert!(m.is_finite() && m >= 0.0, "{l}");
         }
+        assert!(["bvh", "kdtree", "grid"].contains(&f[15]), "{l}");
     }
     let spp1 = lines.iter().find(|l| l.starts_with("spp,1,")).unwrap();
     assert!(spp1.starts_with("spp,1,path,1,8,"), "{spp1}");

@@ -3,6 +3,10 @@
 //! the whole crate once):
 //!
 //! * `cargo test --test kernels` runs them all;
+//! * `cargo test --test kernels accel::` — the BVH, kd-tree, grid and
+//!   brute force give the same hits, bit for bit; the 3D DDA's edge cases;
+//! * `cargo test --test kernels clip::` — the clipping kernels against
+//!   each other and independent oracles;
 //! * `cargo test --test kernels bvh::` — BVH traversal (top level, mesh,
 //!   packets, streams) against brute force;
 //! * `cargo test --test kernels watertight::` — no leaks at shared edges
@@ -15,7 +19,9 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod accel;
 mod bvh;
+mod clip;
 mod properties;
 mod simd;
 mod watertight;

@@ -26,7 +26,7 @@ use std::collections::HashMap;
 
 use glam::{DVec3, Quat, Vec3, Vec3A};
 use prism::core::math::Ray;
-use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
+use prism::geometry::mesh::{Accel, BuildQuality, Mesh, MeshData, NormalMode, WatertightRay};
 
 use crate::common::rng::{Random, SplitMix64 as Rng};
 
@@ -70,6 +70,27 @@ impl Solid {
             ..Default::default()
         };
         Mesh::new(self.name, data, NormalMode::Flat, BuildQuality::Medium).unwrap()
+    }
+
+    /// The mesh with the kd-tree and with the grid.
+    fn other_structures(&self) -> Vec<Mesh> {
+        let data = MeshData {
+            positions: self.positions.clone(),
+            indices: self.indices.clone(),
+            ..Default::default()
+        };
+        [Accel::Kdtree, Accel::Grid]
+            .map(|a| {
+                Mesh::with_accel(
+                    self.name,
+                    data.clone(),
+                    NormalMode::Flat,
+                    BuildQuality::Medium,
+                    a,
+                )
+                .unwrap()
+            })
+            .into()
     }
 
     /// Outward (unnormalised) f64 normal of triangle `i`.
@@ -294,6 +315,7 @@ fn shoot_scaled(
 ) -> Tally {
     solid.assert_convex();
     let mesh = solid.mesh();
+    let others = solid.other_structures();
     let (edges, around) = solid.adjacency();
     let planes = planes(solid);
     let mut rng = Rng(seed);
@@ -321,9 +343,32 @@ fn shoot_scaled(
             let origin = solid.centre + rng.dir() * dist;
             let ray = Ray::new(origin.into(), ((target - origin) * dir_scale).into());
             check_ray(solid, &mesh, &planes, &ray, &mut tally, brute_every);
+            same_in_other_structures(&mesh, &others, &ray);
         }
     }
     tally
+}
+
+/// The kd-tree and the grid give the BVH's hit bit for bit (`t`,
+/// barycentrics, input triangle) and its any-hit answer, so every rule
+/// checked on the BVH's hits holds for them too.
+fn same_in_other_structures(mesh: &Mesh, others: &[Mesh], ray: &Ray) {
+    let want = crate::accel::key(mesh, mesh.intersect(ray, 0.0, f32::INFINITY));
+    for m in others {
+        assert_eq!(
+            crate::accel::key(m, m.intersect(ray, 0.0, f32::INFINITY)),
+            want,
+            "{}: {:?} and the BVH disagree on {ray:?}",
+            m.name,
+            m.accel()
+        );
+        assert_eq!(
+            m.occluded(ray, 0.0, f32::INFINITY),
+            want.is_some(),
+            "{:?} any-hit",
+            m.accel()
+        );
+    }
 }
 
 fn check_ray(

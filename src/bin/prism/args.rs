@@ -269,6 +269,27 @@ impl From<QualityArg> for BuildQuality {
     }
 }
 
+/// `--accel` (render, bench): the structure over mesh triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum AccelArg {
+    Bvh,
+    Kdtree,
+    Grid,
+    Brute,
+}
+
+impl From<AccelArg> for prism::core::settings::Accel {
+    fn from(a: AccelArg) -> Self {
+        use prism::core::settings::Accel;
+        match a {
+            AccelArg::Bvh => Accel::Bvh,
+            AccelArg::Kdtree => Accel::Kdtree,
+            AccelArg::Grid => Accel::Grid,
+            AccelArg::Brute => Accel::Brute,
+        }
+    }
+}
+
 /// The display mapping of `--exposure` and `--tonemap` (render, compare);
 /// the exposure must be finite.
 pub fn png_options(exposure: f32, tonemap: ToneMapArg) -> Result<PngOptions> {

@@ -73,6 +73,10 @@ pub struct BenchArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     pub batch_paths: BatchPathsFlag,
+    /// Structures over mesh triangles to measure, each scene loaded once
+    /// per structure (comma-separated: bvh, kdtree, grid, brute).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [crate::args::AccelArg::Bvh])]
+    pub accel: Vec<crate::args::AccelArg>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -154,6 +158,12 @@ pub struct SceneResult {
     pub threads: usize,
     /// Triangles in the scene.
     pub triangles: usize,
+    /// Structure over mesh triangles.
+    pub accel: &'static str,
+    /// Seconds building the mesh structures.
+    pub accel_build_seconds: f64,
+    /// Bytes of the mesh structures.
+    pub accel_bytes: usize,
     /// Recursive, then wavefront.
     pub integrators: Vec<IntegratorResult>,
     /// Recursive median over wavefront median.
@@ -182,11 +192,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let (pool, threads) = args.threads.pool()?;
     let mut results = Vec::new();
     for scene in &args.scenes {
-        let r = pool.install(|| bench_scene(scene, &args, batch_paths, threads))?;
-        if !args.json {
-            print_table(&r);
+        for &accel in &args.accel {
+            let r =
+                pool.install(|| bench_scene(scene, &args, accel.into(), batch_paths, threads))?;
+            if !args.json {
+                print_table(&r);
+            }
+            results.push(r);
         }
-        results.push(r);
     }
     if args.json {
         let text = serde_json::to_string_pretty(&results)
@@ -199,10 +212,27 @@ pub fn run(args: BenchArgs) -> Result<()> {
 fn bench_scene(
     path: &PathBuf,
     args: &BenchArgs,
+    accel: prism::core::settings::Accel,
     batch_paths: usize,
     threads: usize,
 ) -> Result<SceneResult> {
-    let desc = prism::io::load(path, BuildQuality::Medium)?;
+    let desc = prism::io::load(
+        path,
+        prism::geometry::mesh::BuildOptions {
+            quality: BuildQuality::Medium,
+            accel: Some(accel),
+        },
+    )?;
+    let (mut accel_build_seconds, mut accel_bytes) = (0.0, 0);
+    let mut seen = std::collections::HashSet::new();
+    for o in &desc.objects {
+        if let prism::io::desc::Geometry::Mesh(m) = &o.geometry
+            && seen.insert(std::sync::Arc::as_ptr(m))
+        {
+            accel_build_seconds += m.build_seconds;
+            accel_bytes += m.accel_bytes();
+        }
+    }
     let settings = SettingsDesc {
         transport: args.transport.get(),
         ..args.frame.desc()
@@ -272,6 +302,9 @@ fn bench_scene(
         max_depth: settings.max_depth,
         threads,
         triangles: scene.triangle_count(),
+        accel: accel.name(),
+        accel_build_seconds,
+        accel_bytes,
         integrators,
         speedup_wavefront: speedup,
         speedup_wavefront_fastest: speedup_fastest,
@@ -387,6 +420,12 @@ fn print_table(r: &SceneResult) {
     println!(
         "{}: {}x{}, {} spp, depth {}, {} triangles, {} threads",
         r.scene, r.width, r.height, r.spp, r.max_depth, r.triangles, r.threads
+    );
+    println!(
+        "  structure {}: built in {:.3} s, {:.2} MB",
+        r.accel,
+        r.accel_build_seconds,
+        r.accel_bytes as f64 / 1e6
     );
     println!(
         "  {:<10} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11}",

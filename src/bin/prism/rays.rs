@@ -41,6 +41,10 @@ pub struct RaysArgs {
     /// SIMD code path [default: the fastest this CPU has].
     #[arg(long, value_enum)]
     pub isa: Option<IsaArg>,
+    /// Structure over the mesh (the BVH's packets and streams are traced
+    /// one ray at a time by the others).
+    #[arg(long, value_enum, default_value_t = crate::args::AccelArg::Bvh)]
+    pub accel: crate::args::AccelArg,
     /// Traversal modes to measure (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Mode::Single, Mode::Packet8, Mode::Stream])]
     pub modes: Vec<Mode>,
@@ -119,7 +123,12 @@ pub struct RaysResult {
     pub triangles: usize,
     /// SIMD code path.
     pub isa: &'static str,
-    /// Best BVH build (boxes, build, layout), milliseconds, per thread count.
+    /// Structure traced.
+    pub accel: &'static str,
+    /// Bytes of the structure (nodes or cells, leaves, triangle blocks
+    /// or lists).
+    pub accel_bytes: usize,
+    /// Best build (boxes, build, layout), milliseconds, per thread count.
     pub build_ms: Vec<(usize, f64)>,
     /// Every mode.
     pub modes: Vec<ModeResult>,
@@ -333,6 +342,8 @@ pub fn run(args: RaysArgs) -> Result<()> {
         dir: args.dir.display().to_string(),
         triangles: data.indices.len(),
         isa: simd::active().name(),
+        accel: prism::core::settings::Accel::from(args.accel).name(),
+        accel_bytes: 0,
         build_ms: Vec::new(),
         modes: Vec::new(),
     };
@@ -348,11 +359,12 @@ pub fn run(args: RaysArgs) -> Result<()> {
             let start = Instant::now();
             let m = pool
                 .install(|| {
-                    Mesh::new(
+                    Mesh::with_accel(
                         "anchors",
                         d,
                         NormalMode::Flat,
                         BuildQuality::from(args.bvh_quality),
+                        args.accel.into(),
                     )
                 })
                 .map_err(|e| Error::Invalid(format!("{}: {e}", args.dir.display())))?;
@@ -361,6 +373,7 @@ pub fn run(args: RaysArgs) -> Result<()> {
         }
         result.build_ms.push((t, best * 1e3));
         let mesh = mesh.as_ref().expect("built at least once");
+        result.accel_bytes = mesh.accel_bytes();
         for (name, set) in &sets {
             for &mode in &args.modes {
                 let mut out = vec![None; set.rays.len()];
@@ -402,11 +415,20 @@ pub fn run(args: RaysArgs) -> Result<()> {
             result.dir, result.triangles, result.isa
         );
         for (t, ms) in &result.build_ms {
-            println!(
-                "  build ({:?}, leaves of up to 4), {t} threads: {ms:.1} ms",
-                args.bvh_quality
-            );
+            if result.accel == "bvh" {
+                println!(
+                    "  build ({:?}, leaves of up to 4), {t} threads: {ms:.1} ms",
+                    args.bvh_quality
+                );
+            } else {
+                println!("  build ({}), {t} threads: {ms:.1} ms", result.accel);
+            }
         }
+        println!(
+            "  structure: {}, {:.1} MB",
+            result.accel,
+            result.accel_bytes as f64 / 1e6
+        );
         println!(
             "  {:<11} {:<8} {:>7} {:>10} {:>12} {:>9} {:>9}",
             "rays", "mode", "threads", "best Mr/s", "median Mr/s", "hits", "agree"

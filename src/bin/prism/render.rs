@@ -84,6 +84,12 @@ pub struct RenderArgs {
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
+    /// Acceleration structure over each mesh's triangles: the 8-wide BVH,
+    /// an SAH kd-tree, a uniform grid, or none (test every triangle).
+    /// All give the same image. Default: the scene's `[settings] accel`,
+    /// else bvh.
+    #[arg(long, value_enum, value_name = "STRUCTURE")]
+    accel: Option<crate::args::AccelArg>,
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
@@ -251,12 +257,19 @@ pub fn run(args: RenderArgs) -> Result<()> {
 fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
     let quality: BuildQuality = args.bvh_quality.into();
     let load_start = Instant::now();
+    let options = prism::geometry::mesh::BuildOptions {
+        quality,
+        accel: args.accel.map(Into::into),
+    };
     let (desc, scene_hash) = if args.is_shard() {
-        let (desc, hash) = prism::io::load_with_digest(&args.scene, quality)?;
+        let (desc, hash) = prism::io::load_with_digest(&args.scene, options)?;
         (desc, Some(hash))
     } else {
-        (prism::io::load(&args.scene, quality)?, None)
+        (prism::io::load(&args.scene, options)?, None)
     };
+    // What the meshes were built with (the scene's choice when no --accel).
+    let mut mesh_accel = options.accel.or(desc.settings.accel).unwrap_or_default();
+    let mut accel_bytes = 0;
     let load_seconds = load_start.elapsed().as_secs_f64();
     let mut mesh_build_seconds = 0.0;
     let mut seen = std::collections::HashSet::new();
@@ -265,6 +278,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             && seen.insert(Arc::as_ptr(m))
         {
             mesh_build_seconds += m.build_seconds;
+            accel_bytes += m.accel_bytes();
+            mesh_accel = m.accel();
         }
     }
 
@@ -421,8 +436,10 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
                     args.integrator.kind().name(),
                     args.camera,
                     &format!(
-                        "{:?} render_origin={:?}",
-                        args.bvh_quality, args.render_origin
+                        "{:?} accel={} render_origin={:?}",
+                        args.bvh_quality,
+                        mesh_accel.name(),
+                        args.render_origin
                     )
                     .to_lowercase(),
                 ),
@@ -471,6 +488,8 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         features,
         wall_seconds: wall.elapsed().as_secs_f64(),
         load_seconds,
+        accel: mesh_accel.name(),
+        accel_bytes,
         bvh_build_seconds: mesh_build_seconds + tlas_seconds,
         render_seconds,
         rays: rays.into(),

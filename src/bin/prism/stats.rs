@@ -39,6 +39,11 @@ pub struct RenderStats {
     pub load_seconds: f64,
     /// Building bottom-level (mesh) and top-level BVHs.
     pub bvh_build_seconds: f64,
+    /// Structure over mesh triangles (`bvh`, `kdtree`, `grid`, `brute`).
+    pub accel: &'static str,
+    /// Bytes of the mesh structures (nodes or cells and triangle lists;
+    /// the top level not counted).
+    pub accel_bytes: usize,
     /// Rendering pixels.
     pub render_seconds: f64,
     /// Rays by kind.

@@ -150,9 +150,15 @@ fn build_primitive(
         uvs,
         indices: triangles,
     };
-    Mesh::new(label, data, normal_mode, st.quality)
-        .map(|m| Some((m, offset)))
-        .map_err(fail)
+    Mesh::with_accel(
+        label,
+        data,
+        normal_mode,
+        st.quality.quality,
+        st.quality.accel.unwrap_or_default(),
+    )
+    .map(|m| Some((m, offset)))
+    .map_err(fail)
 }
 
 /// Converts an index list of the given mode to triangles (glTF's vertex

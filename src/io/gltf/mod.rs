@@ -89,7 +89,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::core::error::Error;
-use crate::geometry::mesh::{BuildQuality, Mesh};
+use crate::geometry::mesh::{BuildOptions, Mesh};
 use crate::io::desc::SceneDesc;
 use crate::scene::material::{ImageTexture, Material};
 
@@ -118,7 +118,7 @@ use nodes::build_scene;
 ///
 /// [`Error::Load`] naming `path` and what is wrong with the file or with
 /// a file it references.
-pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc> {
+pub fn load_gltf(path: &Path, quality: impl Into<BuildOptions>) -> crate::Result<SceneDesc> {
     let bytes = crate::io::read_regular_file(path)
         .map_err(|e| Error::load(path, format!("cannot read file: {e}")))?;
     load_gltf_bytes(&bytes, path, quality)
@@ -131,8 +131,9 @@ pub fn load_gltf(path: &Path, quality: BuildQuality) -> crate::Result<SceneDesc>
 pub fn load_gltf_bytes(
     bytes: &[u8],
     path: &Path,
-    quality: BuildQuality,
+    quality: impl Into<BuildOptions>,
 ) -> crate::Result<SceneDesc> {
+    let quality = quality.into();
     let mut state = State::default();
     let result = open(bytes, path).and_then(|ctx| build_scene(&ctx, &mut state, quality));
     state.print_warnings(path);
@@ -157,7 +158,7 @@ type PlacedMesh = (Arc<Mesh>, glam::DVec3);
 /// Caches and warnings accumulated while building the scene.
 #[derive(Default)]
 struct State {
-    quality: BuildQuality,
+    quality: BuildOptions,
     /// Each primitive's mesh and the offset its vertices were moved by
     /// (see `meshes::recentre`).
     meshes: HashMap<(usize, usize), Option<PlacedMesh>>,

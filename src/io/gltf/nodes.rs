@@ -4,7 +4,7 @@
 
 use glam::{Affine3A, DAffine3, Mat4, Quat, Vec3, Vec3A};
 
-use crate::geometry::mesh::{BuildQuality, MAX_COORDINATE, Mesh};
+use crate::geometry::mesh::{BuildOptions, MAX_COORDINATE, Mesh};
 use crate::geometry::transform::Transform;
 use crate::io::desc::{Geometry, ObjectDesc, SceneDesc};
 
@@ -130,7 +130,7 @@ fn check_cycles(nodes: &[gltf::Node]) -> Result<(), String> {
 pub(super) fn build_scene(
     ctx: &Ctx,
     st: &mut State,
-    quality: BuildQuality,
+    quality: BuildOptions,
 ) -> Result<SceneDesc, String> {
     st.quality = quality;
     let doc = &ctx.document;

@@ -4,6 +4,7 @@
 use super::container::{base64_decode, has_scheme, percent_decode_str};
 use super::nodes::MAX_DEPTH;
 use super::*;
+use crate::geometry::mesh::BuildQuality;
 use crate::image::output::srgb_to_linear;
 use crate::io::desc::{Geometry, ObjectDesc};
 use crate::scene::light::{Light, WorldLight};

@@ -16,8 +16,8 @@ use indicatif::ProgressBar;
 
 use prism::core::error::{Error, Result};
 use prism::core::rng::SamplerKind;
-use prism::core::settings::{RenderSettings, Transport};
-use prism::geometry::mesh::BuildQuality;
+use prism::core::settings::{Accel, RenderSettings, Transport};
+use prism::geometry::mesh::{BuildOptions, BuildQuality};
 use prism::image::film::Film;
 use prism::image::metrics::{self, Metrics};
 use prism::image::output::{PngOptions, write_atomic};
@@ -129,11 +129,14 @@ pub enum Knob {
     Transport,
     /// Random numbers: Owen-scrambled Sobol against independent hashes.
     Sampler,
+    /// Structure over mesh triangles: bvh, kdtree, grid (the scene is
+    /// reloaded; the image is the same, only the time changes).
+    Accel,
 }
 
 impl Knob {
     /// Every knob, in sweep order.
-    pub const ALL: [Knob; 8] = [
+    pub const ALL: [Knob; 9] = [
         Knob::Spp,
         Knob::MaxDepth,
         Knob::MinContribution,
@@ -142,6 +145,7 @@ impl Knob {
         Knob::Bvh,
         Knob::Transport,
         Knob::Sampler,
+        Knob::Accel,
     ];
 
     /// Name as written in the CSV and on the command line.
@@ -155,6 +159,7 @@ impl Knob {
             Knob::Bvh => "bvh",
             Knob::Transport => "transport",
             Knob::Sampler => "sampler",
+            Knob::Accel => "accel",
         }
     }
 }
@@ -176,6 +181,9 @@ const BVH_VALUES: [BuildQuality; 6] = [
     BuildQuality::Slow,
     BuildQuality::VerySlow,
 ];
+/// Structures over mesh triangles swept by the `accel` knob (brute force
+/// is left out: hours on any real mesh).
+const ACCEL_VALUES: [Accel; 3] = [Accel::Bvh, Accel::Kdtree, Accel::Grid];
 const TRANSPORT_VALUES: [Transport; 2] = [Transport::Whitted, Transport::Path];
 const SAMPLER_VALUES: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Hash];
 
@@ -202,6 +210,8 @@ pub struct Config {
     pub settings: RenderSettings,
     /// Mesh and top-level BVH preset.
     pub bvh: BuildQuality,
+    /// Structure over mesh triangles.
+    pub accel: Accel,
 }
 
 /// One planned render: which knob it varies and to what.
@@ -235,6 +245,7 @@ impl Knob {
                 .iter()
                 .map(|v| v.name().to_string())
                 .collect(),
+            Knob::Accel => ACCEL_VALUES.iter().map(|v| v.name().to_string()).collect(),
             Knob::Sampler => SAMPLER_VALUES
                 .iter()
                 .map(|v| v.name().to_string())
@@ -252,6 +263,7 @@ impl Knob {
             Knob::LightSamples => s.light_samples = LIGHT_SAMPLE_VALUES[i],
             Knob::RussianRoulette => s.rr_start_depth = RR_VALUES[i],
             Knob::Bvh => c.bvh = BVH_VALUES[i],
+            Knob::Accel => c.accel = ACCEL_VALUES[i],
             Knob::Transport => s.transport = TRANSPORT_VALUES[i],
             Knob::Sampler => s.sampler = SAMPLER_VALUES[i],
         }
@@ -267,6 +279,7 @@ impl Knob {
             Knob::LightSamples => s.light_samples.to_string(),
             Knob::RussianRoulette => rr_name(s.rr_start_depth),
             Knob::Bvh => bvh_name(c.bvh).to_string(),
+            Knob::Accel => c.accel.name().to_string(),
             Knob::Transport => s.transport.name().to_string(),
             Knob::Sampler => s.sampler.name().to_string(),
         }
@@ -317,7 +330,7 @@ pub struct Row {
 
 /// The CSV header.
 pub const CSV_HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel";
 
 fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
     let mut s = String::from(CSV_HEADER);
@@ -326,7 +339,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
         let c = &r.planned.config.settings;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.planned.knob,
             r.planned.value,
             c.transport.name(),
@@ -342,6 +355,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
             r.metrics.rmse,
             r.metrics.rel_mse,
             r.metrics.flip,
+            r.planned.config.accel.name(),
         );
     }
     s
@@ -415,6 +429,8 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         k
     };
     let base_desc = prism::io::load(&args.scene, BuildQuality::Medium)?;
+    // The base's structure: the scene's [settings] accel, else the BVH.
+    let base_accel = base_desc.settings.accel.unwrap_or_default();
     if base_desc.cameras.is_empty() {
         return Err(Error::load(&args.scene, "the scene has no camera"));
     }
@@ -442,6 +458,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     let base = Config {
         settings,
         bvh: BuildQuality::Medium,
+        accel: base_accel,
     };
     let reference_config = Config {
         settings: RenderSettings {
@@ -454,6 +471,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
             ..base.settings.clone()
         },
         bvh: BuildQuality::Medium,
+        accel: base_accel,
     };
     reference_config
         .settings
@@ -535,16 +553,21 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
 
     let display = PngOptions::default();
     let mut rows = Vec::with_capacity(planned.len());
-    let mut loaded: Option<(BuildQuality, SceneDesc)> = None;
+    let mut loaded: Option<((BuildQuality, Accel), SceneDesc)> = None;
     for p in planned {
         if let Some(b) = &bar {
             b.set_message(format!("{} {}", p.knob, p.value));
         }
-        let desc = if p.config.bvh == BuildQuality::Medium {
+        let desc = if p.config.bvh == BuildQuality::Medium && p.config.accel == base_accel {
             &base_desc
         } else {
-            if loaded.as_ref().map(|(q, _)| *q) != Some(p.config.bvh) {
-                loaded = Some((p.config.bvh, prism::io::load(&args.scene, p.config.bvh)?));
+            let key = (p.config.bvh, p.config.accel);
+            if loaded.as_ref().map(|(k, _)| *k) != Some(key) {
+                let options = BuildOptions {
+                    quality: p.config.bvh,
+                    accel: Some(p.config.accel),
+                };
+                loaded = Some((key, prism::io::load(&args.scene, options)?));
             }
             &loaded.as_ref().expect("just loaded").1
         };
@@ -627,6 +650,7 @@ mod tests {
                 ..Default::default()
             },
             bvh: BuildQuality::Medium,
+            accel: Accel::Bvh,
         };
         let p = plan(&base, &Knob::ALL);
         assert_eq!(p[0].knob, "base");
@@ -638,6 +662,7 @@ mod tests {
         assert_eq!(count("light-samples"), LIGHT_SAMPLE_VALUES.len() - 1);
         assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
         assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
+        assert_eq!(count("accel"), ACCEL_VALUES.len() - 1);
         assert_eq!(count("transport"), 1);
         assert_eq!(count("sampler"), 1);
         for x in &p[1..] {
@@ -650,6 +675,7 @@ mod tests {
                 "light-samples" => c.settings.light_samples = base.settings.light_samples,
                 "russian-roulette" => c.settings.rr_start_depth = base.settings.rr_start_depth,
                 "bvh" => c.bvh = base.bvh,
+                "accel" => c.accel = base.accel,
                 "transport" => c.settings.transport = base.settings.transport,
                 "sampler" => c.settings.sampler = base.settings.sampler,
                 k => panic!("unexpected knob {k}"),
