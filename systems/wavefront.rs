@@ -27,8 +27,8 @@ use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
-use crate::core::window::PathMap;
 use crate::core::settings::Style;
+use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
     EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,

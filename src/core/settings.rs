@@ -332,7 +332,10 @@ impl RenderSettings {
         if let Some(w) = &self.window {
             w.validate(self.width, self.height, self.spp)?;
             if self.lines.is_some() {
-                return Err("feature lines need the whole image: they do not combine with a render window".into());
+                return Err(
+                    "feature lines need the whole image: they do not combine with a render window"
+                        .into(),
+                );
             }
         }
         if self.style == Style::Gooch && self.transport != Transport::Whitted {

@@ -67,7 +67,11 @@ impl ExactSum {
         let p = exponent.max(1) - 1;
         let (i, shift) = ((p / 64) as usize, p % 64);
         let low = mantissa << shift;
-        let high = if shift == 0 { 0 } else { mantissa >> (64 - shift) };
+        let high = if shift == 0 {
+            0
+        } else {
+            mantissa >> (64 - shift)
+        };
         let w = &mut self.0;
         // p <= 253, so i <= 3 and the two words exist.
         if bits >> 31 == 0 {
@@ -313,7 +317,16 @@ mod tests {
     #[test]
     fn exact_sums_match_integer_arithmetic_and_convert_back_exactly() {
         let mut r = Sampler::new(3, 0, 0);
-        let mut values = vec![0.0, -0.0, 1.0, -1.0, f32::MIN_POSITIVE, 1e-45, -1e-45, 1e-30];
+        let mut values = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::MIN_POSITIVE,
+            1e-45,
+            -1e-45,
+            1e-30,
+        ];
         values.extend([f32::MAX, -f32::MAX, 1e30, -3.0e-39]);
         for _ in 0..100_000 {
             let hi = (r.next_f32() * 65536.0) as u32;

@@ -54,9 +54,19 @@ fn assert_refused(out: &Output, output: &Path, file: &Path, what: &str) {
     let stderr = assert_failed_without_panic(out);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     let name = file.file_name().unwrap().to_str().unwrap();
-    assert!(stderr.contains(name), "message should name {name}: {stderr}");
-    assert!(stderr.contains(what), "message should say {what:?}: {stderr}");
-    assert!(!output.exists(), "a refused merge wrote {}", output.display());
+    assert!(
+        stderr.contains(name),
+        "message should name {name}: {stderr}"
+    );
+    assert!(
+        stderr.contains(what),
+        "message should say {what:?}: {stderr}"
+    );
+    assert!(
+        !output.exists(),
+        "a refused merge wrote {}",
+        output.display()
+    );
     let dir = output.parent().unwrap();
     let leftovers: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
@@ -73,7 +83,13 @@ fn merged_shards_are_the_single_render_byte_for_byte() {
     let single = rendered(&whitted(), &d.join("single.exr"), &[]);
     let single_png = rendered(&whitted(), &d.join("single.png"), &[]);
     let shards: Vec<PathBuf> = (0..3)
-        .map(|i| rendered(&whitted(), &d.join(format!("s{i}.exr")), &["--shard", &format!("{i}/3")]))
+        .map(|i| {
+            rendered(
+                &whitted(),
+                &d.join(format!("s{i}.exr")),
+                &["--shard", &format!("{i}/3")],
+            )
+        })
         .collect();
     let refs: Vec<&Path> = shards.iter().map(|p| p.as_path()).collect();
     // Any order.
@@ -87,7 +103,10 @@ fn merged_shards_are_the_single_render_byte_for_byte() {
 
     // Sample shards of region shards, the index from a scheduler's variable.
     let mut parts = Vec::new();
-    for (i, var) in ["PRISM_SHARD_INDEX", "SLURM_ARRAY_TASK_ID"].iter().enumerate() {
+    for (i, var) in ["PRISM_SHARD_INDEX", "SLURM_ARRAY_TASK_ID"]
+        .iter()
+        .enumerate()
+    {
         for samples in ["0..1", "1..2"] {
             let out = d.join(format!("a{i}-{samples}.exr"));
             let o = prism()
@@ -134,10 +153,21 @@ material = { color = [0.8, 0.5, 0.3], mirror = 0.2 }
 "#,
     )
     .unwrap();
-    let single = rendered(&scene, &d.join("single.exr"), &["--threads", "2", "--max-depth", "3"]);
+    let single = rendered(
+        &scene,
+        &d.join("single.exr"),
+        &["--threads", "2", "--max-depth", "3"],
+    );
     let shards: Vec<PathBuf> = (0..3)
         .map(|i| {
-            let args = ["--threads", "1", "--max-depth", "3", "--shard", &format!("{i}/3")];
+            let args = [
+                "--threads",
+                "1",
+                "--max-depth",
+                "3",
+                "--shard",
+                &format!("{i}/3"),
+            ];
             rendered(&scene, &d.join(format!("k{i}.exr")), &args)
         })
         .collect();
@@ -161,11 +191,22 @@ fn bad_shard_sets_are_refused_naming_the_file_and_nothing_is_written() {
     let other_scene = d.join("other.toml");
     std::fs::write(
         &other_scene,
-        std::fs::read_to_string(whitted()).unwrap().replace("vfov = 40", "vfov = 41"),
+        std::fs::read_to_string(whitted())
+            .unwrap()
+            .replace("vfov = 40", "vfov = 41"),
     )
     .unwrap();
-    let foreign_scene = rendered(&other_scene, &d.join("other-scene.exr"), &["--shard", "1/2"]);
-    assert_refused(&merge(&[&s0, &foreign_scene], &out), &out, &foreign_scene, "different scene");
+    let foreign_scene = rendered(
+        &other_scene,
+        &d.join("other-scene.exr"),
+        &["--shard", "1/2"],
+    );
+    assert_refused(
+        &merge(&[&s0, &foreign_scene], &out),
+        &out,
+        &foreign_scene,
+        "different scene",
+    );
 
     // Other settings.
     let deeper = shard("deeper.exr", &["--shard", "1/2", "--max-depth", "3"]);
@@ -219,7 +260,10 @@ fn bad_shard_options_fail_before_rendering() {
         (&["--shard", "auto/2"], "PRISM_SHARD_INDEX"),
         (&["--pixel-bounds", "0,25,0,4"], "outside"),
         (&["--samples", "1..3"], "beyond"),
-        (&["--shard", "0/2", "--pixel-bounds", "0,4,0,4"], "cannot be used with"),
+        (
+            &["--shard", "0/2", "--pixel-bounds", "0,4,0,4"],
+            "cannot be used with",
+        ),
     ];
     for (args, what) in cases {
         let out = d.join("s.exr");

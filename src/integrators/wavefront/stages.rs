@@ -45,7 +45,12 @@ pub fn generate_camera_rays(
     out.clear();
     for local in 0..count {
         let k = paths.path(first + local as u64);
-        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, k.pixel(settings.width), k.sample);
+        let mut sampler = Sampler::with_kind(
+            settings.sampler,
+            settings.seed,
+            k.pixel(settings.width),
+            k.sample,
+        );
         let ray = camera.ray(film_sample(k.x, k.y, settings.spp, &mut sampler));
         out.push(RayItem {
             ray,
