@@ -10,7 +10,7 @@ use crate::accel::tlas::{TlasCounters, TlasUpdate};
 use crate::core::math::Color;
 use crate::core::settings::RenderSettings;
 use crate::geometry::mesh::BuildQuality;
-use crate::image::film::Film;
+use crate::image::film::{Film, PixelAccumulator};
 use crate::image::lines::LineOverlay;
 use crate::integrators::IntegratorKind;
 use crate::integrators::counters::RenderCounters;
@@ -94,8 +94,14 @@ pub struct AccumulationState {
 /// The finished frame.
 #[derive(Resource, Default)]
 pub struct Frame {
-    /// The image, or `None` if the frame failed.
+    /// The image, or `None` if the frame failed: the whole image, or the
+    /// window's pixels (its columns by its rows, in order) when the
+    /// settings have a [`window`](RenderSettings::window).
     pub film: Option<Film>,
+    /// Each window pixel's exact sum and sample count, laid out like
+    /// `film`: only for windowed one-shot frames (shards), whose sample
+    /// ranges are merged by adding sums.
+    pub sums: Option<PixelAccumulator>,
     /// Why the frame failed.
     pub error: Option<String>,
     /// Rays traced and non-finite samples caught.

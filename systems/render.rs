@@ -68,6 +68,12 @@ pub fn render_recursive(world: &mut World) {
         .get_resource::<ProgressiveRendering>()
         .is_some_and(|p| p.enabled);
     if progressive {
+        if config.settings.window.is_some() {
+            world.resource_mut::<Frame>().error = Some(
+                "progressive rendering covers the whole image: it takes no render window".into(),
+            );
+            return;
+        }
         render_progressive(world, &scene, camera, &config);
         return;
     }
@@ -76,11 +82,19 @@ pub fn render_recursive(world: &mut World) {
         .progress
         .as_deref()
         .map(|p| p as integrators::Progress<'_>);
-    let (film, counters) =
-        integrators::recursive::render(&scene, &camera, &config.settings, progress);
+    let (film, sums, counters) = if config.settings.window.is_some() {
+        let (sums, counters) =
+            integrators::recursive::render_sums(&scene, &camera, &config.settings, progress);
+        (sums.resolve(), Some(sums), counters)
+    } else {
+        let (film, counters) =
+            integrators::recursive::render(&scene, &camera, &config.settings, progress);
+        (film, None, counters)
+    };
     let mut frame = world.resource_mut::<Frame>();
     frame.render_seconds = start.elapsed().as_secs_f64();
     frame.film = Some(film);
+    frame.sums = sums;
     frame.counters = counters;
     frame.samples = config.settings.spp;
 }

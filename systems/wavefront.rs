@@ -28,6 +28,7 @@ use bevy_ecs::system::SystemParam;
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
 use crate::core::settings::Style;
+use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
     EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
@@ -242,6 +243,8 @@ pub struct WavefrontFrame {
     pub camera: CameraRays,
     /// Class of each material, indexed like the scene's materials.
     pub classes: Vec<MaterialClass>,
+    /// Where each path of the settings' window goes.
+    pub paths: PathMap,
     /// `(first path, path count)` per batch.
     pub batches: Vec<(u64, usize)>,
     /// Index of the running batch.
@@ -357,6 +360,7 @@ pub fn generate_camera_rays(
         kernels::generate_camera_rays(
             &frame.camera,
             &config.settings,
+            &frame.paths,
             first,
             count,
             &mut rays.0,
@@ -435,6 +439,7 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
             C::CLASS,
             &frame.scene,
             &config.settings,
+            &frame.paths,
             first,
             &hits.0,
             &mut scratch.shading,
@@ -525,7 +530,6 @@ pub fn advance_bounce(
 
 /// Stage: adds the batch's paths to their pixels.
 pub fn update_film(
-    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
     mut pixels: ResMut<PixelSums>,
@@ -533,13 +537,7 @@ pub fn update_film(
 ) {
     let (first, _) = frame.batches[frame.batch];
     stats.0.run_stage(Stage::UpdateFilm, |counters| {
-        kernels::update_film(
-            &radiance.0,
-            first,
-            config.settings.spp,
-            &mut pixels.0,
-            counters,
-        )
+        kernels::update_film(&radiance.0, &frame.paths, first, &mut pixels.0, counters)
     });
 }
 
@@ -557,8 +555,11 @@ pub fn render_wavefront(world: &mut World) {
     let shadows = features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch;
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
+    let paths = settings.path_map();
+    let (window_width, window_rows) = (paths.columns(), paths.rows().len() as u32);
     let camera = CameraRays::relative_to(&camera, scene.origin(), settings.width, settings.height);
     world.insert_resource(WavefrontFrame {
+        paths,
         scene,
         camera,
         classes,
@@ -567,14 +568,12 @@ pub fn render_wavefront(world: &mut World) {
         features,
         shadows,
     });
-    world.insert_resource(PixelSums(PixelAccumulator::new(
-        settings.width,
-        settings.height,
-    )));
+    world.insert_resource(PixelSums(PixelAccumulator::new(window_width, window_rows)));
     world.insert_resource(WavefrontStats::default());
 
     let start = Instant::now();
-    let rows_per_path = 1.0 / (settings.width as f64 * settings.spp as f64);
+    let rows_per_path =
+        1.0 / (window_width as f64 * (world.resource::<WavefrontFrame>().paths.samples()) as f64);
     let mut rows_reported = 0u64;
     for (b, &(first, count)) in batches.iter().enumerate() {
         world.resource_mut::<WavefrontFrame>().batch = b;
@@ -590,11 +589,13 @@ pub fn render_wavefront(world: &mut World) {
         }
     }
     let render_seconds = start.elapsed().as_secs_f64();
-    let film = world.resource::<PixelSums>().0.resolve();
+    let sums = std::mem::take(&mut world.resource_mut::<PixelSums>().0);
+    let film = sums.resolve();
     let mut report = world.resource::<WavefrontStats>().0;
     report.batches = batches.len();
     let mut frame = world.resource_mut::<Frame>();
     frame.film = Some(film);
+    frame.sums = settings.window.is_some().then_some(sums);
     frame.counters = report.counters;
     frame.render_seconds = render_seconds;
     frame.wavefront = Some(report);

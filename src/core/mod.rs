@@ -9,3 +9,4 @@ pub mod optics;
 pub mod rng;
 pub mod sampling;
 pub mod settings;
+pub mod window;

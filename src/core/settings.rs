@@ -1,6 +1,8 @@
 //! Render settings shared by every integrator and every transport, with
 //! the limits that keep memory and recursion bounded.
 
+use crate::core::window::{PathMap, RenderWindow};
+
 /// Settings shared by every integrator.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
@@ -29,6 +31,12 @@ pub struct RenderSettings {
     /// Path tracing: bounce from which Russian roulette may end paths
     /// (`None`: never; paths run to `max_depth`).
     pub rr_start_depth: Option<u32>,
+    /// The part of the image and of each pixel's samples to render
+    /// (`None`: the whole image, all `spp` samples). A windowed render
+    /// produces only the window's pixels, each the exact sum of the
+    /// window's samples, which are the same samples the whole render takes
+    /// (see [`crate::core::window`]).
+    pub window: Option<RenderWindow>,
     /// How surfaces lit by lights are shaded: physically, or with Gooch's
     /// cool-to-warm tones for illustration.
     pub style: Style,
@@ -250,6 +258,7 @@ impl Default for RenderSettings {
             transport: Transport::Whitted,
             light_samples: 1,
             rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
+            window: None,
             style: Style::Shaded,
             gooch: GoochParams::default(),
             lines: None,
@@ -320,6 +329,15 @@ impl RenderSettings {
                 self.min_contribution
             ));
         }
+        if let Some(w) = &self.window {
+            w.validate(self.width, self.height, self.spp)?;
+            if self.lines.is_some() {
+                return Err(
+                    "feature lines need the whole image: they do not combine with a render window"
+                        .into(),
+                );
+            }
+        }
         if self.style == Style::Gooch && self.transport != Transport::Whitted {
             return Err(
                 "the Gooch style shades with Whitted transport (mirrors and glass included); \
@@ -332,5 +350,18 @@ impl RenderSettings {
             l.validate()?;
         }
         Ok(())
+    }
+
+    /// The window rendered: [`RenderSettings::window`], or the whole
+    /// image with all its samples.
+    pub fn window(&self) -> RenderWindow {
+        self.window
+            .clone()
+            .unwrap_or_else(|| RenderWindow::full(self.width, self.height, self.spp))
+    }
+
+    /// Where each path of the window goes.
+    pub fn path_map(&self) -> PathMap {
+        PathMap::new(&self.window(), self.width)
     }
 }

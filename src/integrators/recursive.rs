@@ -8,7 +8,7 @@ use super::{Progress, accumulate, camera_rays, film_sample};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
-use crate::image::film::{Film, PixelSum};
+use crate::image::film::{Film, PixelAccumulator, PixelSum};
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
@@ -129,36 +129,53 @@ pub fn pixel_sample(
     }
 }
 
-/// Renders every pixel with the recursive tracer, rows in parallel.
-pub fn render(
+/// The exact sum of the window's samples of pixel `(x, y)`.
+fn pixel_sum(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    (x, y): (u32, u32),
+    samples: std::ops::Range<u32>,
+    counters: &mut RenderCounters,
+) -> PixelSum {
+    let mut sum = PixelSum::default();
+    for s in samples {
+        let l = pixel_sample(scene, settings, cam, (x, y), (s, settings.spp), counters);
+        accumulate(&mut sum, l, counters);
+    }
+    sum
+}
+
+/// Renders the settings' window with the recursive tracer, rows in
+/// parallel, into one value per window pixel (row-major over the window's
+/// columns and rows) made by `f` from the pixel's exact sum.
+fn render_rows<T: Send>(
     scene: &RenderScene,
     camera: &Camera,
     settings: &RenderSettings,
     progress: Option<Progress<'_>>,
-) -> (Film, RenderCounters) {
-    let mut film = Film::new(settings.width, settings.height);
+    out: &mut [T],
+    f: impl Fn(PixelSum) -> T + Sync,
+) -> RenderCounters {
     let cam = camera_rays(scene, camera, settings);
-    let width = settings.width as usize;
-    let counters = film
-        .pixels
-        .par_chunks_mut(width)
-        .enumerate()
-        .map(|(y, row)| {
+    let map = settings.path_map();
+    let window = settings.window();
+    let x0 = map.first_column();
+    out.par_chunks_mut(map.columns() as usize)
+        .zip(map.rows().par_iter())
+        .map(|(row, &y)| {
             let mut counters = RenderCounters::default();
-            for (x, px) in row.iter_mut().enumerate() {
-                let mut sum = PixelSum::default();
-                for s in 0..settings.spp {
-                    let l = pixel_sample(
-                        scene,
-                        settings,
-                        &cam,
-                        (x as u32, y as u32),
-                        (s, settings.spp),
-                        &mut counters,
-                    );
-                    accumulate(&mut sum, l, &mut counters);
-                }
-                *px = sum.mean();
+            for (i, px) in row.iter_mut().enumerate() {
+                let x = x0 + i as u32;
+                let sum = pixel_sum(
+                    scene,
+                    settings,
+                    &cam,
+                    (x, y),
+                    window.samples.clone(),
+                    &mut counters,
+                );
+                *px = f(sum);
             }
             if let Some(p) = progress {
                 p(1);
@@ -168,6 +185,42 @@ pub fn render(
         .reduce(RenderCounters::default, |mut a, b| {
             a.add(&b);
             a
-        });
+        })
+}
+
+/// Renders every pixel of the settings' window with the recursive tracer,
+/// rows in parallel: the whole image when the settings have no window,
+/// else a film of the window's pixels (its columns by its rows, in order).
+pub fn render(
+    scene: &RenderScene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<Progress<'_>>,
+) -> (Film, RenderCounters) {
+    let window = settings.window();
+    let mut film = Film::new(
+        window.columns.end - window.columns.start,
+        window.row_count(),
+    );
+    let counters = render_rows(scene, camera, settings, progress, &mut film.pixels, |s| {
+        s.mean()
+    });
     (film, counters)
+}
+
+/// Like [`render`], but keeps each window pixel's exact sum and sample
+/// count (for sample-range shards, which are merged by adding sums).
+pub fn render_sums(
+    scene: &RenderScene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: Option<Progress<'_>>,
+) -> (PixelAccumulator, RenderCounters) {
+    let window = settings.window();
+    let mut sums = PixelAccumulator::new(
+        window.columns.end - window.columns.start,
+        window.row_count(),
+    );
+    let counters = render_rows(scene, camera, settings, progress, sums.pixels_mut(), |s| s);
+    (sums, counters)
 }

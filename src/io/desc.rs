@@ -107,6 +107,7 @@ impl SettingsDesc {
                 .rr_start_depth
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
+            window: None,
             style: self.style.or(under.style).unwrap_or(d.style),
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
             lines: self.lines.or(under.lines),

@@ -32,6 +32,32 @@ pub fn load(path: &Path, options: impl Into<BuildOptions>) -> Result<SceneDesc> 
     }
 }
 
+thread_local! {
+    /// The digest of the files read so far by [`load_with_digest`] on this
+    /// thread, when one is running.
+    static SOURCES: std::cell::RefCell<Option<sha2::Sha256>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Loads a scene like [`load`] and also returns the SHA-256 (hex) of its
+/// content: every file the loaders read (the scene file, included glTF
+/// files, their buffers and textures), in the order they were read, each
+/// as its length and bytes. Paths do not enter it, so a copied scene
+/// folder hashes the same; an edit to any of its files does not.
+pub fn load_with_digest(
+    path: &Path,
+    options: impl Into<BuildOptions>,
+) -> Result<(SceneDesc, String)> {
+    use sha2::Digest;
+    SOURCES.with(|s| *s.borrow_mut() = Some(sha2::Sha256::new()));
+    let result = load(path, options);
+    let digest = SOURCES
+        .with(|s| s.borrow_mut().take())
+        .expect("set above")
+        .finalize();
+    let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+    result.map(|desc| (desc, hex))
+}
+
 /// Reads a whole file, refusing anything but a regular file: a path to a
 /// device such as `/dev/zero` or `/dev/stdin`, or to a FIFO, would never
 /// end (or block) and a hostile scene could name one. The error is the
@@ -45,5 +71,13 @@ pub(crate) fn read_regular_file(path: &Path) -> std::result::Result<Vec<u8>, Str
             "is not a regular file (a device, FIFO or socket)".into()
         });
     }
-    std::fs::read(path).map_err(|e| e.to_string())
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    SOURCES.with(|s| {
+        if let Some(h) = s.borrow_mut().as_mut() {
+            use sha2::Digest;
+            h.update((bytes.len() as u64).to_le_bytes());
+            h.update(&bytes);
+        }
+    });
+    Ok(bytes)
 }

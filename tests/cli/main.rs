@@ -5,6 +5,9 @@
 //! * `cargo test --test cli render::` — `prism render` and `prism bench`:
 //!   bad input gives a clear message and a non-zero exit, never a panic
 //!   or an output file; help, statistics and the benchmark's JSON;
+//! * `cargo test --test cli merge::` — `prism render --shard` and
+//!   `prism merge`: merged shards are the single render byte for byte, bad
+//!   sets of shards are refused naming the file, with nothing written;
 //! * `cargo test --test cli tools::` — the measuring tools: the error
 //!   trend against samples per pixel, `prism compare`, `prism tradeoff`
 //!   and `prism bench rays` on a small synthetic workload.
@@ -12,5 +15,6 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod merge;
 mod render;
 mod tools;

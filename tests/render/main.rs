@@ -15,6 +15,8 @@
 //!   against the recursive one, and its queues;
 //! * `cargo test --test render scene_updates::` — incremental scene updates
 //!   against scenes built from scratch, progressive accumulation;
+//! * `cargo test --test render shards::` — region and sample-range shards
+//!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
 //!   closed form, feature lines and their vector (SVG) form.
 
@@ -27,4 +29,5 @@ mod large_worlds;
 mod path;
 mod robustness;
 mod scene_updates;
+mod shards;
 mod wavefront;

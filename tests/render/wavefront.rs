@@ -159,6 +159,7 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> Renderer {
     let features = prism::scene::features::SceneFeatures::of(&scene);
     let shadows = features.needs_shadow_rays(config.transport);
     world.insert_resource(WavefrontFrame {
+        paths: config.path_map(),
         camera: prism::scene::camera::CameraRays::new(&camera, config.width, config.height),
         batches: prism::integrators::wavefront::batch_ranges(&config, 1 << 20).collect(),
         batch: 0,

@@ -17,6 +17,7 @@ mod bench;
 mod compare;
 mod rays;
 mod render;
+mod shard;
 mod stats;
 mod tradeoff;
 mod vector;
@@ -39,6 +40,10 @@ enum Command {
     /// configuration, and write tradeoff.csv and a plot of error against
     /// render time with the Pareto front.
     Tradeoff(tradeoff::TradeoffArgs),
+    /// Merge shards written by `prism render --shard/--pixel-bounds/--samples`
+    /// into the whole image (.exr or .png), after checking that they are of
+    /// one render and cover every pixel's samples exactly once.
+    Merge(shard::MergeArgs),
 }
 
 fn main() -> ExitCode {
@@ -48,6 +53,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Tradeoff(args) => tradeoff::run(args),
+        Command::Merge(args) => shard::run_merge(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,6 @@
 //! `prism render`: one scene file to one image, with optional statistics.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -7,8 +8,11 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use prism::core::error::{Error, Result};
+use prism::core::settings::RenderSettings;
+use prism::core::window::RenderWindow;
 use prism::geometry::mesh::BuildQuality;
 use prism::image::output::OutputFormat;
+use prism::image::shard::Manifest;
 use prism::io::desc::{Geometry, SettingsDesc};
 use prism::systems::wavefront::BatchSize;
 use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
@@ -18,6 +22,7 @@ use crate::args::{
     BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
     SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
+use crate::shard::{self, PixelBounds, ShardSpec};
 use crate::stats::{RenderStats, WavefrontStatsJson};
 use crate::vector;
 use prism::core::settings::{GoochParams, LineSettings};
@@ -88,6 +93,23 @@ pub struct RenderArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
+    /// Render only shard I of N and write it as a shard (an .exr file for
+    /// `prism merge`). The image is cut into 4N bands of whole rows (fewer
+    /// when it has fewer rows); shard I renders bands I, I+N, I+2N, ... so
+    /// that slow and fast parts of the image spread over all shards.
+    /// `auto/N` takes I from PRISM_SHARD_INDEX, SLURM_ARRAY_TASK_ID or
+    /// JOB_COMPLETION_INDEX (the first set), counting from 0.
+    #[arg(long, value_name = "I/N", value_parser = shard::parse_shard, conflicts_with = "pixel_bounds")]
+    shard: Option<ShardSpec>,
+    /// Render only columns X0..X1 of rows Y0..Y1 (integers, half-open) and
+    /// write them as a shard (.exr) for `prism merge`.
+    #[arg(long, value_name = "X0,X1,Y0,Y1", value_parser = shard::parse_pixel_bounds)]
+    pixel_bounds: Option<PixelBounds>,
+    /// Render only samples A..B (half-open, from 0) of each pixel's --spp
+    /// and write a sample shard (.exr with exact sums and counts) for
+    /// `prism merge`; combines with --shard or --pixel-bounds.
+    #[arg(long, value_name = "A..B", value_parser = shard::parse_samples)]
+    samples: Option<Range<u32>>,
     /// Shading style: `shaded` (the transport's lighting) or `gooch`
     /// (cool-to-warm tones from the key light, the scene's first light, for
     /// illustration; Whitted transport only) [default: the scene's, else shaded].
@@ -149,11 +171,74 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+impl RenderArgs {
+    /// True when rendering part of the image or of its samples.
+    fn is_shard(&self) -> bool {
+        self.shard.is_some() || self.pixel_bounds.is_some() || self.samples.is_some()
+    }
+
+    /// The window of a shard and how it was asked for, checked against
+    /// the image size and spp; `None` for a whole render.
+    fn window(&self, settings: &RenderSettings) -> Result<Option<(RenderWindow, String)>> {
+        if !self.is_shard() {
+            return Ok(None);
+        }
+        if settings.lines.is_some() || self.lines_svg.is_some() {
+            return Err(Error::Invalid(
+                "feature lines (--lines and its options, --lines-svg, or a lines table in the scene's [settings]) are drawn over the whole image and are not available for shards"
+                    .into(),
+            ));
+        }
+        let (w, h) = (settings.width, settings.height);
+        let mut window = RenderWindow::full(w, h, settings.spp);
+        let mut spec = "whole image".to_string();
+        if let Some(s) = self.shard {
+            let index = match s.index {
+                Some(i) => i,
+                None => shard::auto_index(s.count)?,
+            };
+            window.rows =
+                prism::core::window::shard_rows(index, s.count, h).map_err(Error::Invalid)?;
+            spec = format!("--shard {index}/{}", s.count);
+        }
+        if let Some(b) = &self.pixel_bounds {
+            if b.columns.end > w || b.rows.end > h {
+                return Err(Error::Invalid(format!(
+                    "--pixel-bounds {},{},{},{}: outside the {w}x{h} image",
+                    b.columns.start, b.columns.end, b.rows.start, b.rows.end
+                )));
+            }
+            window.columns = b.columns.clone();
+            window.rows = vec![b.rows.clone()];
+            spec = format!(
+                "--pixel-bounds {},{},{},{}",
+                b.columns.start, b.columns.end, b.rows.start, b.rows.end
+            );
+        }
+        if let Some(r) = &self.samples {
+            if r.end > settings.spp {
+                return Err(Error::Invalid(format!(
+                    "--samples {}..{}: beyond the {} samples per pixel (--spp)",
+                    r.start, r.end, settings.spp
+                )));
+            }
+            window.samples = r.clone();
+        }
+        Ok(Some((window, spec)))
+    }
+}
+
 /// Renders the scene and writes the image (and the statistics).
 pub fn run(args: RenderArgs) -> Result<()> {
     let wall = Instant::now();
     // Fail on a bad output name before spending time on the render.
-    OutputFormat::from_path(&args.output)?;
+    let format = OutputFormat::from_path(&args.output)?;
+    if args.is_shard() && format != OutputFormat::Exr {
+        return Err(Error::Invalid(format!(
+            "{}: a shard (--shard, --pixel-bounds, --samples) is written as an .exr file; `prism merge` makes the PNG from all shards",
+            args.output.display()
+        )));
+    }
     if let Some(svg) = &args.lines_svg {
         vector::check_svg_path(svg)?;
     }
@@ -176,7 +261,12 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         quality,
         accel: args.accel.map(Into::into),
     };
-    let desc = prism::io::load(&args.scene, options)?;
+    let (desc, scene_hash) = if args.is_shard() {
+        let (desc, hash) = prism::io::load_with_digest(&args.scene, options)?;
+        (desc, Some(hash))
+    } else {
+        (prism::io::load(&args.scene, options)?, None)
+    };
     // What the meshes were built with (the scene's choice when no --accel).
     let mut mesh_accel = options.accel.or(desc.settings.accel).unwrap_or_default();
     let mut accel_bytes = 0;
@@ -251,6 +341,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         ..args.frame.desc()
     }
     .resolve(s);
+    let mut settings = settings;
+    // The image size and spp are checked before the window is made from them.
+    settings.validate().map_err(|e| {
+        Error::Invalid(format!(
+            "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
+            args.scene.display()
+        ))
+    })?;
+    let window = args.window(&settings)?;
+    settings.window = window.as_ref().map(|(w, _)| w.clone());
     settings.validate().map_err(|e| {
         Error::Invalid(format!(
             "{}: invalid render settings (from the command line or the scene's [settings]): {e}",
@@ -279,7 +379,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     // The line stage reports its rows on the same bar.
     let passes = 1 + settings.lines.is_some() as u64;
     let bar = progress_bar(
-        settings.height as u64 * passes,
+        settings.window().row_count() as u64 * passes,
         args.quiet,
         "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
     );
@@ -326,7 +426,44 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let Some(film) = &frame.film else {
         return Err(Error::Invalid("the renderer produced no image".into()));
     };
-    prism::image::output::write_image_with_lines(&args.output, film, frame.lines.as_ref(), &png)?;
+    match (&window, scene_hash) {
+        (Some((w, spec)), Some(scene_hash)) => {
+            let manifest = Manifest {
+                version: env!("CARGO_PKG_VERSION").to_string(),
+                scene_hash,
+                settings: shard::settings_text(
+                    &settings,
+                    args.integrator.kind().name(),
+                    args.camera,
+                    &format!(
+                        "{:?} accel={} render_origin={:?}",
+                        args.bvh_quality,
+                        mesh_accel.name(),
+                        args.render_origin
+                    )
+                    .to_lowercase(),
+                ),
+                seed: settings.seed,
+                spp: settings.spp,
+                shard: spec.clone(),
+                samples: w.samples.clone(),
+            };
+            let shard = prism::image::shard::Shard::from_window(
+                manifest,
+                &settings,
+                w,
+                film,
+                frame.sums.as_ref(),
+            );
+            prism::image::shard::write_shard(&args.output, &shard)?;
+        }
+        _ => prism::image::output::write_image_with_lines(
+            &args.output,
+            film,
+            frame.lines.as_ref(),
+            &png,
+        )?,
+    }
     if let Some(svg) = &args.lines_svg {
         let scene = accel
             .scene

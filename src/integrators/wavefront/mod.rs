@@ -50,7 +50,7 @@ pub fn batch_ranges(
     settings: &RenderSettings,
     batch_paths: usize,
 ) -> impl Iterator<Item = (u64, usize)> {
-    let total = settings.width as u64 * settings.height as u64 * settings.spp as u64;
+    let total = settings.path_map().path_count();
     let step = batch_paths.max(1) as u64;
     (0..total.div_ceil(step)).map(move |b| {
         let first = b * step;

@@ -10,6 +10,7 @@ use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
+use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
 use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
@@ -29,26 +30,28 @@ use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
 /// Stage: one camera ray per path of the batch `[first, first + count)`.
-/// Path `p` is sample `p % spp` of pixel `p / spp`, with the same film
-/// position and sample keys as the recursive tracer.
+/// Path `p` goes where `paths` says (sample `p % spp` of pixel `p / spp`
+/// for a whole image), with the same film position and sample keys as the
+/// recursive tracer.
 pub fn generate_camera_rays(
     camera: &CameraRays,
     settings: &RenderSettings,
+    paths: &PathMap,
     first: u64,
     count: usize,
     out: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
     out.clear();
-    let spp = settings.spp as u64;
-    let width = settings.width as u64;
     for local in 0..count {
-        let p = first + local as u64;
-        let pixel = p / spp;
-        let sample = (p % spp) as u32;
-        let (x, y) = ((pixel % width) as u32, (pixel / width) as u32);
-        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel as u32, sample);
-        let ray = camera.ray(film_sample(x, y, settings.spp, &mut sampler));
+        let k = paths.path(first + local as u64);
+        let mut sampler = Sampler::with_kind(
+            settings.sampler,
+            settings.seed,
+            k.pixel(settings.width),
+            k.sample,
+        );
+        let ray = camera.ray(film_sample(k.x, k.y, settings.spp, &mut sampler));
         out.push(RayItem {
             ray,
             throughput: Color::ONE,
@@ -221,12 +224,12 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
+    paths: &PathMap,
     first: u64,
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    let spp = settings.spp as u64;
     shade_hits(scene, hits, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
@@ -235,13 +238,8 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         if !NEE && !SCATTER {
             return;
         }
-        let p = first + h.path as u64;
-        let mut sampler = Sampler::with_kind(
-            settings.sampler,
-            settings.seed,
-            (p / spp) as u32,
-            (p % spp) as u32,
-        );
+        let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
+        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
         let lobes = LobeChoice::new(it);
         if NEE {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
@@ -267,10 +265,12 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
 /// Stage: shades the hits of `class` with the kernel for the lobes the
 /// class has ([`MaterialClass::is_lit`], [`MaterialClass::scatters`]) and
 /// the settings' transport; `first` is the batch's first path.
+#[allow(clippy::too_many_arguments)]
 pub fn shade_class(
     class: MaterialClass,
     scene: &RenderScene,
     settings: &RenderSettings,
+    paths: &PathMap,
     first: u64,
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
@@ -284,7 +284,7 @@ pub fn shade_class(
             // Every lit class also scatters diffusely under path transport.
             (true, _) => shade_path::<true, true>,
         };
-        return f(scene, settings, first, hits, scratch, to);
+        return f(scene, settings, paths, first, hits, scratch, to);
     }
     let f = match lobes {
         (false, false) => shade::<false, false>,
@@ -364,19 +364,20 @@ pub fn trace_shadow_rays(
     }
 }
 
-/// Stage: adds each finished path of the batch to its pixel, in path
-/// order (so samples are summed in the same order as the recursive
-/// tracer sums them), dropping and counting non-finite samples.
+/// Stage: adds each finished path of the batch to its window pixel,
+/// dropping and counting non-finite samples. The sums are exact, so the
+/// order in which paths are added does not matter.
 pub fn update_film(
     radiance: &[Color],
+    paths: &PathMap,
     first: u64,
-    spp: u32,
     sums: &mut PixelAccumulator,
     counters: &mut RenderCounters,
 ) {
     let pixels = sums.pixels_mut();
+    let n = paths.samples() as u64;
     for (local, &l) in radiance.iter().enumerate() {
-        let pixel = ((first + local as u64) / spp as u64) as usize;
+        let pixel = ((first + local as u64) / n) as usize;
         accumulate(&mut pixels[pixel], l, counters);
     }
 }
