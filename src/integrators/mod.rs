@@ -1,4 +1,4 @@
-//! Integrators: turn a [`RenderScene`](crate::scene::RenderScene) and a
+//! Integrators: turn a [`RenderScene`] and a
 //! camera into a [`Film`](crate::image::film::Film).
 
 pub mod counters;

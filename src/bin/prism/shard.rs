@@ -158,7 +158,9 @@ pub struct MergeArgs {
     /// tone map applied to the merged image).
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
-    /// Exposure in stops for PNG output [default: 0].
+    /// Exposure in stops for PNG output [default: 0]. Shards do not
+    /// record a scene's `[settings] exposure`: pass it again here to get
+    /// the PNG of the single render.
     #[arg(
         long,
         value_name = "EV",
