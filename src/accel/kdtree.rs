@@ -324,6 +324,17 @@ impl Builder<'_> {
         let (mut litems, mut ritems) = (left, right);
         litems.extend(new_left);
         ritems.extend(new_right);
+        let (me, lhi, rlo) = self.push_split(lo, hi, axis, p);
+        self.build(litems, lev, lo, lhi, depth + 1);
+        self.nodes[me].index = self.nodes.len() as u32;
+        self.build(ritems, rev, rlo, hi, depth + 1);
+    }
+
+    /// Pushes an inner node splitting `lo..hi` at `p` on `axis` (its right
+    /// child's index is filled in once the left subtree is built); returns
+    /// the node's index and the upper corner of the left child's box and
+    /// the lower corner of the right child's.
+    fn push_split(&mut self, lo: DVec3, hi: DVec3, axis: usize, p: f64) -> (usize, DVec3, DVec3) {
         let mut lhi = hi;
         lhi[axis] = p;
         let mut rlo = lo;
@@ -335,9 +346,7 @@ impl Builder<'_> {
             index: 0,
             count: 0,
         });
-        self.build(litems, lev, lo, lhi, depth + 1);
-        self.nodes[me].index = self.nodes.len() as u32;
-        self.build(ritems, rev, rlo, hi, depth + 1);
+        (me, lhi, rlo)
     }
 
     /// The naive build: every candidate plane evaluated by counting.
@@ -374,17 +383,7 @@ impl Builder<'_> {
         let (mut left, mut right, new_left, new_right) = self.partition(&items, lo, hi, axis, p);
         left.extend(new_left);
         right.extend(new_right);
-        let mut lhi = hi;
-        lhi[axis] = p;
-        let mut rlo = lo;
-        rlo[axis] = p;
-        let me = self.nodes.len();
-        self.nodes.push(KdNode {
-            split: p,
-            axis: axis as u8,
-            index: 0,
-            count: 0,
-        });
+        let (me, lhi, rlo) = self.push_split(lo, hi, axis, p);
         self.build_naive(left, lo, lhi, depth + 1);
         self.nodes[me].index = self.nodes.len() as u32;
         self.build_naive(right, rlo, hi, depth + 1);
