@@ -81,10 +81,7 @@ impl RenderScene {
         for inst in &mut instances {
             inst.rebase(origin);
         }
-        let lights = light_sources
-            .iter()
-            .map(|(l, t)| WorldLight::new(l, t, origin))
-            .collect();
+        let lights = resolve_lights(&light_sources, origin);
         let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
@@ -151,4 +148,12 @@ impl RenderScene {
     pub fn tlas_build_seconds(&self) -> f64 {
         self.tlas_build_seconds
     }
+}
+
+/// Lights placed in the world, resolved in the frame centred on `origin`.
+pub(super) fn resolve_lights(sources: &[(Light, Transform)], origin: DVec3) -> Vec<WorldLight> {
+    sources
+        .iter()
+        .map(|(l, t)| WorldLight::new(l, t, origin))
+        .collect()
 }

@@ -5,9 +5,9 @@ use crate::core::math::Color;
 use crate::geometry::transform::Transform;
 use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
-use crate::scene::light::{Light, WorldLight};
+use crate::scene::light::Light;
 use crate::scene::material::Material;
-use crate::scene::render_scene::RenderScene;
+use crate::scene::render_scene::{RenderScene, resolve_lights};
 use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.
@@ -106,10 +106,7 @@ impl RenderScene {
 
     /// Replaces the lights (placed in world coordinates).
     pub fn set_lights(&mut self, lights: Vec<(Light, Transform)>) {
-        self.lights = lights
-            .iter()
-            .map(|(l, t)| WorldLight::new(l, t, self.origin))
-            .collect();
+        self.lights = resolve_lights(&lights, self.origin);
         self.light_sources = lights;
     }
 
@@ -127,11 +124,7 @@ impl RenderScene {
             inst.rebase(origin);
             self.tlas.updated(i as u32, inst.placement());
         }
-        self.lights = self
-            .light_sources
-            .iter()
-            .map(|(l, t)| WorldLight::new(l, t, origin))
-            .collect();
+        self.lights = resolve_lights(&self.light_sources, origin);
         true
     }
 
