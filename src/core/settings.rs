@@ -48,6 +48,8 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// Radiosity's options (used by [`Transport::Radiosity`] only).
+    pub radiosity: crate::core::radiosity::RadiositySettings,
 }
 
 /// How surfaces with a diffuse or glossy lobe are shaded.
@@ -192,6 +194,9 @@ pub enum Transport {
     /// multiple importance sampling: emissive surfaces are area lights,
     /// diffuse surfaces scatter light onwards.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once
+    /// per scene and looked up by view rays (see [`crate::radiosity`]).
+    Radiosity,
 }
 
 impl Transport {
@@ -200,6 +205,7 @@ impl Transport {
         match self {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
+            Transport::Radiosity => "radiosity",
         }
     }
 }
@@ -263,6 +269,7 @@ impl Default for RenderSettings {
             gooch: GoochParams::default(),
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
+            radiosity: Default::default(),
         }
     }
 }
@@ -346,6 +353,12 @@ impl RenderSettings {
             );
         }
         self.gooch.validate()?;
+        if self.transport == Transport::Radiosity {
+            self.radiosity.validate()?;
+            if self.window.is_some() {
+                return Err("radiosity renders whole images: it takes no render window".into());
+            }
+        }
         if let Some(l) = &self.lines {
             l.validate()?;
         }

@@ -4,6 +4,7 @@
 pub mod counters;
 pub mod lines;
 pub mod progressive;
+pub mod radiosity;
 pub mod recursive;
 pub mod vector_lines;
 pub mod wavefront;

@@ -126,6 +126,10 @@ pub fn pixel_sample(
     match settings.transport {
         Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
         Transport::Path => trace_path(scene, settings, &ray, &mut sampler, counters),
+        // Radiosity frames need their solution and are rendered by
+        // `integrators::radiosity`; without one, surfaces show as Whitted
+        // transport sees them.
+        Transport::Radiosity => trace(scene, settings, &ray, 0, Color::ONE, counters),
     }
 }
 

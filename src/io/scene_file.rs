@@ -65,6 +65,8 @@ struct FileSettings {
     lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
+    /// Radiosity's options (`[settings.radiosity]`).
+    radiosity: Option<crate::core::radiosity::RadiosityDesc>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -103,6 +105,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Radiosity,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -516,6 +519,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Radiosity => crate::core::settings::Transport::Radiosity,
             }),
             light_samples: s.light_samples,
             rr_start_depth: s.russian_roulette.map(|r| match r {
@@ -534,6 +538,7 @@ impl Ctx<'_> {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
             }),
+            radiosity: s.radiosity.unwrap_or_default(),
         })
     }
 

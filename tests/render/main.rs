@@ -9,6 +9,9 @@
 //!   through the `prism` binary, mirror, lens, shadows, determinism);
 //! * `cargo test --test render path::` — path transport against analytic
 //!   answers (white furnace, area lights) and the Whitted tracer;
+//! * `cargo test --test render radiosity::` — radiosity transport: the
+//!   Cornell box against the path tracer, the solution reused while the
+//!   camera moves, thread-count independence, refused input;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -27,6 +30,7 @@ mod analytic;
 mod illustration;
 mod large_worlds;
 mod path;
+mod radiosity;
 mod robustness;
 mod scene_updates;
 mod shards;

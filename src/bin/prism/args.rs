@@ -233,6 +233,9 @@ pub enum TransportArg {
     /// Path tracing with next-event estimation and MIS; emissive surfaces
     /// are area lights.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once,
+    /// then viewed (see the --radiosity-* and --patch-size options).
+    Radiosity,
 }
 
 impl From<TransportArg> for Transport {
@@ -240,6 +243,7 @@ impl From<TransportArg> for Transport {
         match a {
             TransportArg::Whitted => Transport::Whitted,
             TransportArg::Path => Transport::Path,
+            TransportArg::Radiosity => Transport::Radiosity,
         }
     }
 }
