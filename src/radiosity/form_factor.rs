@@ -5,6 +5,7 @@
 //!   differential area at a point of `i` to the triangle `j` (Lambert's
 //!   contour formula, after clipping `j` to the half-space above the
 //!   point), by the midpoint rule on `i`'s `K = 4^l` sub-triangles,
+//!   for pairs closer than [`NEAR_DISTANCE`] times the sum of their sizes
 //!   each split further (up to [`MAX_EXTRA_DEPTH`] times) while the term
 //!   at its centroid and the mean at its corners differ by more than
 //!   [`QUADRATURE_TOLERANCE`] of the patch: that happens near a touching
@@ -21,10 +22,13 @@
 //!   centre (instead of rasterising every patch with a z-buffer): the
 //!   same sampling of the hemisphere, with exact visibility per pixel.
 //!
-//! The ray-cast estimate is made reciprocal afterwards: `A_i F_ij` and
-//! `A_j F_ji` are both replaced by their mean, so `A_i F_ij = A_j F_ji`
-//! holds to rounding (both are accurate, so rows still sum to 1 in a
-//! closed scene). The hemicube's rows are kept as they are: a hemicube
+//! The ray-cast estimate is reciprocal by construction: each unordered
+//! pair is estimated once, as the area form factor
+//! `G_ij = (A_i U_ij + A_j U_ji) / 2 * V_ij` (the unoccluded term from
+//! both sides, averaged; the visibility, which is symmetric, from one set
+//! of rays), and `F_ij = G_ij / A_i`, `F_ji = G_ij / A_j`, so
+//! `A_i F_ij = A_j F_ji` holds to rounding. Both unoccluded terms are
+//! accurate, so rows still sum to 1 in a closed scene. The hemicube's rows are kept as they are: a hemicube
 //! at the centroid misjudges touching neighbours (the form factor at the
 //! centre is not the patch's mean), and averaging the two directions
 //! would spread that error into the row sums, which the hemicube gets
@@ -115,41 +119,26 @@ impl FormFactors {
         out
     }
 
-    /// Builds the matrix from sparse rows sorted by column, making it
-    /// reciprocal: `A_i F_ij` and `A_j F_ji` become their mean.
-    pub fn reciprocal(rows: Vec<Vec<(u32, f32)>>, area: &[f32]) -> Self {
-        let n = rows.len();
-        // Column-wise copy: transposed[j] holds (i, F_ij), i increasing.
-        let mut transposed: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n];
-        for (i, row) in rows.iter().enumerate() {
-            for &(j, f) in row {
-                transposed[j as usize].push((i as u32, f));
+    /// Builds the reciprocal matrix from the upper triangle of the area
+    /// form factors `G_ij = A_i F_ij = A_j F_ji` (`upper[i]` holds the
+    /// entries `(j, G_ij)` for `j > i`, sorted): `F_ij = G_ij / A_i`.
+    pub fn from_symmetric(upper: Vec<Vec<(u32, f32)>>, area: &[f32]) -> Self {
+        let n = upper.len();
+        // lower[j] holds (i, G_ij) for i < j, i increasing.
+        let mut lower: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n];
+        for (i, row) in upper.iter().enumerate() {
+            for &(j, g) in row {
+                lower[j as usize].push((i as u32, g));
             }
         }
         let mut out = FormFactors {
-            offsets: Vec::with_capacity(n + 1),
+            offsets: vec![0],
             ..Default::default()
         };
-        out.offsets.push(0);
         for i in 0..n {
-            // Merge F_ij (row) and F_ji (transposed) by j.
-            let (a, b) = (&rows[i], &transposed[i]);
-            let (mut ka, mut kb) = (0, 0);
-            while ka < a.len() || kb < b.len() {
-                let ja = a.get(ka).map_or(u32::MAX, |e| e.0);
-                let jb = b.get(kb).map_or(u32::MAX, |e| e.0);
-                let j = ja.min(jb);
-                let fij = if ja == j { a[ka].1 } else { 0.0 };
-                let fji = if jb == j { b[kb].1 } else { 0.0 };
-                ka += (ja == j) as usize;
-                kb += (jb == j) as usize;
-                // The same sum in both rows (addition commutes exactly).
-                let g = 0.5 * (area[i] * fij + area[j as usize] * fji);
-                let f = g / area[i];
-                if f > 0.0 {
-                    out.cols.push(j);
-                    out.vals.push(f);
-                }
+            for &(j, g) in lower[i].iter().chain(&upper[i]) {
+                out.cols.push(j);
+                out.vals.push(g / area[i]);
             }
             out.offsets.push(out.cols.len());
         }
@@ -228,6 +217,20 @@ fn behind(ci: &[Vec3A; 3], ni: Vec3A, cj: &[Vec3A; 3]) -> bool {
     cj.iter().all(|&y| ni.dot(y - o) <= eps)
 }
 
+/// Pairs whose centroids are closer than this times the sum of their
+/// sizes (longest edges) integrate the unoccluded term adaptively; the
+/// others use the midpoint rule on the quadrature level's pieces.
+pub const NEAR_DISTANCE: f32 = 4.0;
+
+/// Longest edge of a triangle.
+#[inline]
+fn size(c: &[Vec3A; 3]) -> f32 {
+    (c[1] - c[0])
+        .length()
+        .max((c[2] - c[1]).length())
+        .max((c[0] - c[2]).length())
+}
+
 /// Deepest extra subdivision of the sending patch for the unoccluded term.
 pub const MAX_EXTRA_DEPTH: u32 = 6;
 
@@ -278,48 +281,63 @@ fn unoccluded(
     weight * fc
 }
 
-/// The ray-cast estimate of `F_ij`: the unoccluded term integrated over
-/// the pieces `pieces` of `i` (its sub-triangles at the quadrature
-/// level, refined adaptively), times the visibility seen from the
-/// pieces' centroids `xs` towards the points `ys` of `j` (one ray each,
-/// weighted by the point term there).
+/// The unoccluded term `U_ij` over the pieces `pieces` of `i` (midpoint
+/// rule, adaptive when `near`), and the point terms at their centroids
+/// `xs` (written to `fx`).
 #[allow(clippy::too_many_arguments)]
-fn ray_cast_pair(
-    occluders: &Mesh,
+fn unoccluded_term(
     ni: Vec3A,
     cj: &[Vec3A; 3],
     nj: Vec3A,
     pieces: &[[Vec3A; 3]],
     xs: &[Vec3A],
-    ys: &[Vec3A],
-    shift: usize,
+    near: bool,
+    fx: &mut Vec<f32>,
     scratch: &mut Vec<Vec3A>,
+) -> f32 {
+    let oj = centroid(cj);
+    fx.clear();
+    fx.extend(xs.iter().map(|&x| point_term(x, ni, cj, nj, oj, scratch)));
+    let k = xs.len() as f32;
+    if near {
+        pieces
+            .iter()
+            .map(|&t| unoccluded(t, 1.0 / k, 0, ni, cj, nj, oj, scratch))
+            .sum()
+    } else {
+        fx.iter().sum::<f32>() / k
+    }
+}
+
+/// The visibility `V_ij`: rays from the centroids `xs` of `i`'s pieces
+/// to the paired points `ys` of `j`, weighted by the point terms `fx`.
+fn visibility(
+    occluders: &Mesh,
+    ni: Vec3A,
+    cj: &[Vec3A; 3],
+    xs: &[Vec3A],
+    ys: &[Vec3A],
+    fx: &[f32],
+    shift: usize,
 ) -> f32 {
     let k = xs.len();
     let oj = centroid(cj);
-    let weight = 1.0 / k as f32;
-    let u: f32 = pieces
-        .iter()
-        .map(|&t| unoccluded(t, weight, 0, ni, cj, nj, oj, scratch))
-        .sum();
-    if u <= 0.0 {
-        return 0.0;
-    }
     let (mut seen, mut total) = (0.0f32, 0.0f32);
-    for (a, &x) in xs.iter().enumerate() {
-        let fx = point_term(x, ni, cj, nj, oj, scratch);
-        if fx <= 0.0 {
+    let mut clipped = Vec::with_capacity(6);
+    for (a, (&x, &f)) in xs.iter().zip(fx).enumerate() {
+        if f <= 0.0 {
             continue;
         }
-        total += fx;
+        total += f;
         let mut y = ys[(a + shift) % k];
         if ni.dot(y - x) <= 0.0 {
             // The paired point is below x's horizon: aim at the visible
             // part of j instead.
-            y = scratch.iter().copied().sum::<Vec3A>() / scratch.len() as f32;
+            clip_above(cj, x, ni, &mut clipped);
+            y = clipped.iter().copied().sum::<Vec3A>() / clipped.len().max(1) as f32;
         }
         if !occluders.occluded(&Ray::new(x, y - x), 1e-4, 1.0 - 1e-4) {
-            seen += fx;
+            seen += f;
         }
     }
     if total <= 0.0 {
@@ -327,46 +345,47 @@ fn ray_cast_pair(
         // from the patch's centre to j's decides.
         let x = xs.iter().copied().sum::<Vec3A>() / k as f32;
         let visible = !occluders.occluded(&Ray::new(x, oj - x), 1e-4, 1.0 - 1e-4);
-        return if visible { u } else { 0.0 };
+        return if visible { 1.0 } else { 0.0 };
     }
-    u * (seen / total)
+    seen / total
 }
 
-/// Row `i` of the ray-cast estimate, as sorted sparse entries.
+/// Row `i` of the ray-cast estimate for `j > i` only, as sorted sparse
+/// entries of the reciprocal area form factor
+/// `G_ij = (A_i U_ij + A_j U_ji) / 2 * V_ij` (visibility is symmetric, so
+/// each pair casts its rays once).
 fn ray_cast_row(
     patches: &Patches,
     occluders: &Mesh,
     points: &[Vec<Vec3A>],
-    level: u32,
+    pieces: &[Vec<[Vec3A; 3]>],
     i: usize,
 ) -> Vec<(u32, f32)> {
     let ci = patches.corners(i);
     let ni = patches.normal(i);
-    let pieces = sub_triangles(ci, level);
+    let oi = centroid(&ci);
+    let si = size(&ci);
+    let (mut fi, mut fj) = (Vec::new(), Vec::new());
     let mut scratch = Vec::with_capacity(6);
     let mut row = Vec::new();
-    for j in 0..patches.len() {
-        if j == i {
-            continue;
-        }
+    for j in i + 1..patches.len() {
         let cj = patches.corners(j);
         let nj = patches.normal(j);
         if behind(&ci, ni, &cj) || behind(&cj, nj, &ci) {
             continue;
         }
-        let f = ray_cast_pair(
-            occluders,
-            ni,
-            &cj,
-            nj,
-            &pieces,
-            &points[i],
-            &points[j],
-            i + j,
-            &mut scratch,
-        );
-        if f > 0.0 {
-            row.push((j as u32, f));
+        let near = (centroid(&cj) - oi).length() < NEAR_DISTANCE * (si + size(&cj));
+        let uij = unoccluded_term(ni, &cj, nj, &pieces[i], &points[i], near, &mut fi, &mut scratch);
+        let uji = unoccluded_term(nj, &ci, ni, &pieces[j], &points[j], near, &mut fj, &mut scratch);
+        // The same sum whichever row computes it.
+        let g = 0.5 * (patches.area[i] * uij + patches.area[j] * uji);
+        if !(g > 0.0) {
+            continue;
+        }
+        let v = visibility(occluders, ni, &cj, &points[i], &points[j], &fi, i + j);
+        let g = g * v;
+        if g > 0.0 {
+            row.push((j as u32, g));
         }
     }
     row
@@ -463,20 +482,25 @@ pub fn compute(
             progress(if d % 64 == 0 { 64 } else { d % 64 });
         }
     };
-    let rows: Vec<Vec<(u32, f32)>> = match method {
+    match method {
         FormFactorMethod::Raycast { level } => {
-            let points: Vec<Vec<Vec3A>> = (0..n)
+            let pieces: Vec<Vec<[Vec3A; 3]>> = (0..n)
                 .into_par_iter()
-                .map(|p| quadrature_points(patches.corners(p), level))
+                .map(|p| sub_triangles(patches.corners(p), level))
                 .collect();
-            (0..n)
+            let points: Vec<Vec<Vec3A>> = pieces
+                .par_iter()
+                .map(|t| t.iter().map(centroid).collect())
+                .collect();
+            let upper: Vec<Vec<(u32, f32)>> = (0..n)
                 .into_par_iter()
                 .map(|i| {
-                    let r = ray_cast_row(patches, occluders, &points, level, i);
+                    let r = ray_cast_row(patches, occluders, &points, &pieces, i);
                     tick();
                     r
                 })
-                .collect()
+                .collect();
+            FormFactors::from_symmetric(upper, &patches.area)
         }
         FormFactorMethod::Hemicube { resolution } => {
             let rows: Vec<Vec<(u32, f32)>> = (0..n)
@@ -487,10 +511,9 @@ pub fn compute(
                     r
                 })
                 .collect();
-            return FormFactors::from_rows(rows);
+            FormFactors::from_rows(rows)
         }
-    };
-    FormFactors::reciprocal(rows, &patches.area)
+    }
 }
 
 #[cfg(test)]
