@@ -111,6 +111,7 @@ pub fn trace_path(
 /// Radiance of sample `s` of the `spp` samples of pixel `(x, y)`: its
 /// camera ray, traced with the settings' transport. Its random numbers
 /// are keyed by (seed, pixel, sample).
+#[inline]
 pub fn pixel_sample(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -130,6 +131,7 @@ pub fn pixel_sample(
 }
 
 /// The exact sum of the window's samples of pixel `(x, y)`.
+#[inline(always)]
 fn pixel_sum(
     scene: &RenderScene,
     settings: &RenderSettings,
