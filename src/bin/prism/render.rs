@@ -336,7 +336,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(svg) = &args.lines_svg {
         vector::check_svg_path(svg, "--lines-svg")?;
     }
-    args.overlay()?;
+    let overlay_request = args.overlay()?;
     if let Some(s) = &args.stats
         && s.extension().and_then(|e| e.to_str()) != Some("json")
     {
@@ -346,13 +346,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )));
     }
     let (pool, threads) = args.threads.pool()?;
-    pool.install(|| render_with_pool(&args, threads, wall))
+    pool.install(|| render_with_pool(&args, overlay_request, threads, wall))
 }
 
-fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
+fn render_with_pool(
+    args: &RenderArgs,
+    overlay_request: Option<OverlayRequest>,
+    threads: usize,
+    wall: Instant,
+) -> Result<()> {
     let quality: BuildQuality = args.bvh_quality.into();
     let load_start = Instant::now();
-    let overlay_request = args.overlay()?;
     let options = prism::geometry::mesh::BuildOptions {
         quality,
         // A structure overlay builds the meshes with the structure it draws.
