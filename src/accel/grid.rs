@@ -359,13 +359,8 @@ mod tests {
     /// margin offers those slabs.
     #[test]
     fn every_primitive_within_the_margin_is_offered() {
-        let mut s = 99u64;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::core::rng::Sampler::new(99, 0, 0);
+        let mut next = || rng.next_f32();
         // 998 slabs and two corner specks: bounds the unit cube, 30 cells
         // per axis (3 * 1000^(1/3)).
         let n = 1000;
