@@ -3,6 +3,7 @@
 
 pub mod counters;
 pub mod lines;
+pub mod overlay;
 pub mod progressive;
 pub mod recursive;
 pub mod vector_lines;

@@ -1,7 +1,7 @@
 //! Pinhole camera: rays through an image plane.
 
 use bevy_ecs::component::Component;
-use glam::{DVec3, Mat3A, Vec2, Vec3, Vec3A};
+use glam::{DMat3, DVec3, DVec4, Mat3A, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
 
@@ -152,5 +152,35 @@ impl CameraProjection {
     /// The eye.
     pub fn origin(&self) -> Vec3A {
         self.origin
+    }
+
+    /// Homogeneous clip coordinates of world point `p` for a film of
+    /// `size` pixels, in double precision: `w` is the depth of
+    /// [`Self::project`], and `x / w`, `y / w` run from -1 to 1 across the
+    /// image (left to right, top to bottom), so the image is the view
+    /// volume `|x|, |y| <= w` of [`crate::core::clip`]. `z` is 0 (depth is
+    /// not clipped). Clip coordinates are linear in `p`: a parameter
+    /// along a clipped segment is the same parameter along the world
+    /// segment.
+    pub fn to_clip(&self, p: Vec3A, size: Vec2) -> DVec4 {
+        let v = DMat3::from_cols(
+            self.to_film.x_axis.as_dvec3(),
+            self.to_film.y_axis.as_dvec3(),
+            self.to_film.z_axis.as_dvec3(),
+        ) * (p.as_dvec3() - self.origin.as_dvec3());
+        DVec4::new(
+            2.0 * v.y / size.x as f64 - v.x,
+            2.0 * v.z / size.y as f64 - v.x,
+            0.0,
+            v.x,
+        )
+    }
+
+    /// Film position in pixels of a point in the view volume of
+    /// [`Self::to_clip`] (`w > 0`, `|x|, |y| <= w`): inside
+    /// `[0, size.x] x [0, size.y]`, boundary included.
+    pub fn clip_to_film(c: DVec4, size: Vec2) -> Vec2 {
+        let f = |v: f64, s: f32| ((v / c.w + 1.0) * 0.5 * s as f64).clamp(0.0, s as f64) as f32;
+        Vec2::new(f(c.x, size.x), f(c.y, size.y))
     }
 }

@@ -18,7 +18,11 @@
 //! * `cargo test --test render shards::` — region and sample-range shards
 //!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
-//!   closed form, feature lines and their vector (SVG) form.
+//!   closed form, feature lines and their vector (SVG) form;
+//! * `cargo test --test render overlay::` — the structure overlays
+//!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
+//!   clipping and visibility against independent f64 and brute-force
+//!   answers, and the kd-tree's planes counted.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -26,6 +30,7 @@ mod common;
 mod analytic;
 mod illustration;
 mod large_worlds;
+mod overlay;
 mod path;
 mod robustness;
 mod scene_updates;

@@ -24,8 +24,9 @@ use crate::args::{
 };
 use crate::shard::{self, PixelBounds, ShardSpec};
 use crate::stats::{RenderStats, WavefrontStatsJson};
-use crate::vector;
+use crate::vector::{self, OverlayRequest};
 use prism::core::settings::{GoochParams, LineSettings};
+use prism::integrators::overlay::{self, OverlayKind};
 
 /// `--render-origin`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -157,6 +158,26 @@ pub struct RenderArgs {
     /// segments are left out).
     #[arg(long, requires = "lines_svg")]
     hidden_lines: bool,
+    /// Draw lines over the image: `wireframe` (every triangle edge),
+    /// `bvh` (the BVH's boxes), `grid` (the grid cells that hold
+    /// triangles) or `kdtree` (the kd-tree's splitting planes), each with
+    /// the mesh's bounds, projected with the camera and clipped to the
+    /// view; pieces hidden behind surfaces (found by casting rays) are
+    /// dashed. bvh, grid and kdtree build the meshes with that structure
+    /// (an --accel naming another one is refused).
+    #[arg(long, value_enum, value_name = "KIND")]
+    overlay: Option<OverlayArg>,
+    /// Levels of the BVH (child boxes below the root) or of the kd-tree
+    /// (splitting planes from the root) the overlay draws, 1 to 64
+    /// [default: 4].
+    #[arg(long, value_name = "N", requires = "overlay")]
+    overlay_depth: Option<u32>,
+    /// Also write the overlay's lines as vectors to FILE.svg.
+    #[arg(long, value_name = "FILE", requires = "overlay")]
+    overlay_svg: Option<PathBuf>,
+    /// Leave the overlay's hidden pieces out instead of dashing them.
+    #[arg(long, requires = "overlay")]
+    overlay_visible_only: bool,
     /// Where the single-precision frame the kernels work in is centred:
     /// at the camera (precision follows the distance to the camera,
     /// whatever the distance to the world origin), or at the world origin
@@ -171,7 +192,75 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+/// `--overlay`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum OverlayArg {
+    /// Every triangle edge.
+    Wireframe,
+    /// The BVH's boxes.
+    Bvh,
+    /// The uniform grid's cells that hold triangles.
+    Grid,
+    /// The kd-tree's splitting planes.
+    Kdtree,
+}
+
+impl From<OverlayArg> for OverlayKind {
+    fn from(a: OverlayArg) -> Self {
+        match a {
+            OverlayArg::Wireframe => OverlayKind::Wireframe,
+            OverlayArg::Bvh => OverlayKind::Bvh,
+            OverlayArg::Grid => OverlayKind::Grid,
+            OverlayArg::Kdtree => OverlayKind::Kdtree,
+        }
+    }
+}
+
 impl RenderArgs {
+    /// The overlay asked for, checked: a depth only for the BVH and the
+    /// kd-tree and within 1 ..= MAX_DEPTH, an SVG path that can be written,
+    /// and no --accel other than the structure drawn.
+    fn overlay(&self) -> Result<Option<OverlayRequest>> {
+        let Some(arg) = self.overlay else {
+            return Ok(None);
+        };
+        let kind = OverlayKind::from(arg);
+        if let Some(d) = self.overlay_depth {
+            if !kind.has_levels() {
+                return Err(Error::Invalid(format!(
+                    "--overlay-depth: the {} overlay has no levels (only bvh and kdtree do)",
+                    kind.name()
+                )));
+            }
+            if !(1..=overlay::MAX_DEPTH).contains(&d) {
+                return Err(Error::Invalid(format!(
+                    "--overlay-depth {d}: must be 1 to {}",
+                    overlay::MAX_DEPTH
+                )));
+            }
+        }
+        if let (Some(want), Some(given)) = (kind.accel(), self.accel) {
+            let given: prism::core::settings::Accel = given.into();
+            if given != want {
+                return Err(Error::Invalid(format!(
+                    "--overlay {} draws the {} the meshes are built with, but --accel {} asks for another structure",
+                    kind.name(),
+                    want.name(),
+                    given.name()
+                )));
+            }
+        }
+        if let Some(svg) = &self.overlay_svg {
+            vector::check_svg_path(svg, "--overlay-svg")?;
+        }
+        Ok(Some(OverlayRequest {
+            kind,
+            depth: self.overlay_depth.unwrap_or(overlay::DEFAULT_DEPTH),
+            hidden: !self.overlay_visible_only,
+            svg: self.overlay_svg.clone(),
+        }))
+    }
+
     /// True when rendering part of the image or of its samples.
     fn is_shard(&self) -> bool {
         self.shard.is_some() || self.pixel_bounds.is_some() || self.samples.is_some()
@@ -182,6 +271,11 @@ impl RenderArgs {
     fn window(&self, settings: &RenderSettings) -> Result<Option<(RenderWindow, String)>> {
         if !self.is_shard() {
             return Ok(None);
+        }
+        if self.overlay.is_some() {
+            return Err(Error::Invalid(
+                "--overlay draws over the whole image and is not available for shards".into(),
+            ));
         }
         if settings.lines.is_some() || self.lines_svg.is_some() {
             return Err(Error::Invalid(
@@ -240,8 +334,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )));
     }
     if let Some(svg) = &args.lines_svg {
-        vector::check_svg_path(svg)?;
+        vector::check_svg_path(svg, "--lines-svg")?;
     }
+    let overlay_request = args.overlay()?;
     if let Some(s) = &args.stats
         && s.extension().and_then(|e| e.to_str()) != Some("json")
     {
@@ -251,15 +346,24 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )));
     }
     let (pool, threads) = args.threads.pool()?;
-    pool.install(|| render_with_pool(&args, threads, wall))
+    pool.install(|| render_with_pool(&args, overlay_request, threads, wall))
 }
 
-fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
+fn render_with_pool(
+    args: &RenderArgs,
+    overlay_request: Option<OverlayRequest>,
+    threads: usize,
+    wall: Instant,
+) -> Result<()> {
     let quality: BuildQuality = args.bvh_quality.into();
     let load_start = Instant::now();
     let options = prism::geometry::mesh::BuildOptions {
         quality,
-        accel: args.accel.map(Into::into),
+        // A structure overlay builds the meshes with the structure it draws.
+        accel: args
+            .accel
+            .map(Into::into)
+            .or(overlay_request.as_ref().and_then(|o| o.kind.accel())),
     };
     let (desc, scene_hash) = if args.is_shard() {
         let (desc, hash) = prism::io::load_with_digest(&args.scene, options)?;
@@ -426,6 +530,18 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let Some(film) = &frame.film else {
         return Err(Error::Invalid("the renderer produced no image".into()));
     };
+    let overlay_mask = match &overlay_request {
+        Some(req) => {
+            let scene = accel
+                .scene
+                .as_ref()
+                .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
+            Some(vector::overlay_lines(
+                req, scene, &camera, &settings, args.quiet,
+            )?)
+        }
+        None => None,
+    };
     match (&window, scene_hash) {
         (Some((w, spec)), Some(scene_hash)) => {
             let manifest = Manifest {
@@ -457,12 +573,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             );
             prism::image::shard::write_shard(&args.output, &shard)?;
         }
-        _ => prism::image::output::write_image_with_lines(
-            &args.output,
-            film,
-            frame.lines.as_ref(),
-            &png,
-        )?,
+        _ => {
+            let mut overlays: Vec<&prism::image::lines::LineOverlay> = frame.lines.iter().collect();
+            overlays.extend(overlay_mask.as_ref().map(|(mask, _)| mask));
+            prism::image::output::write_image_with_overlays(&args.output, film, &overlays, &png)?;
+            if let (Some(req), Some((_, Some(svg)))) = (&overlay_request, &overlay_mask)
+                && let Some(path) = &req.svg
+            {
+                prism::image::output::write_atomic(path, svg.as_bytes())?;
+            }
+        }
     }
     if let Some(svg) = &args.lines_svg {
         let scene = accel
