@@ -5,5 +5,6 @@
 
 pub mod gooch;
 pub mod interaction;
+pub mod microfacet;
 pub mod path;
 pub mod whitted;

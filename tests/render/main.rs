@@ -24,6 +24,7 @@
 mod common;
 
 mod analytic;
+mod environment;
 mod illustration;
 mod large_worlds;
 mod path;
