@@ -207,7 +207,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "FILE")]
     env: Option<PathBuf>,
     /// Scale of the environment's radiance [default: the scene's, else 1].
-    #[arg(long, value_name = "X")]
+    #[arg(long, value_name = "X", allow_hyphen_values = true)]
     env_intensity: Option<f32>,
     /// Turn of the environment about +Y in degrees, right-handed
     /// [default: the scene's, else 0].
