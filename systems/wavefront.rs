@@ -400,12 +400,7 @@ pub fn handle_escaped_rays(
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::HandleEscapedRays, |_| {
-        kernels::handle_escaped_rays(
-            &frame.scene,
-            &config.settings,
-            &escaped.0,
-            &mut radiance.0,
-        );
+        kernels::handle_escaped_rays(&frame.scene, &config.settings, &escaped.0, &mut radiance.0);
         escaped.0.clear();
     });
 }

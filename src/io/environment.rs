@@ -47,10 +47,7 @@ pub fn decode_environment_map(bytes: &[u8]) -> std::result::Result<EnvironmentMa
         .map_err(|e| e.to_string())?
         .to_rgb32f();
     let (width, height) = img.dimensions();
-    let texels: Vec<Color> = img
-        .pixels()
-        .map(|p| Color::new(p[0], p[1], p[2]))
-        .collect();
+    let texels: Vec<Color> = img.pixels().map(|p| Color::new(p[0], p[1], p[2])).collect();
     EnvironmentMap::new(width, height, texels).map_err(|e| e.0)
 }
 
@@ -83,7 +80,10 @@ mod tests {
         let img = image::Rgb32FImage::from_fn(w, h, |_, _| image::Rgb(c));
         let mut out = Vec::new();
         image::DynamicImage::ImageRgb32F(img)
-            .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::OpenExr)
+            .write_to(
+                &mut std::io::Cursor::new(&mut out),
+                image::ImageFormat::OpenExr,
+            )
             .unwrap();
         out
     }

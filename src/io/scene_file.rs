@@ -620,9 +620,9 @@ impl Ctx<'_> {
             )));
         }
         let source = match (&e.path, e.color) {
-            (Some(path), None) => EnvironmentSource::Map(crate::io::environment::load_environment_map(
-                &self.base.join(path),
-            )?),
+            (Some(path), None) => EnvironmentSource::Map(
+                crate::io::environment::load_environment_map(&self.base.join(path))?,
+            ),
             (None, Some(c)) => EnvironmentSource::Uniform(
                 non_negative("environment.color", c.get()).map_err(|m| self.err(m))?,
             ),

@@ -527,7 +527,8 @@ mod tests {
                     + 2.0 * std::f64::consts::PI * (p as f64 + 0.5) / (np * sub) as f64;
                 let r = (1.0 - z * z).sqrt();
                 let d = Vec3A::new((r * phi.cos()) as f32, z as f32, (r * phi.sin()) as f32);
-                let dw = (2.0 / (nc * sub) as f64) * (2.0 * std::f64::consts::PI / (np * sub) as f64);
+                let dw =
+                    (2.0 / (nc * sub) as f64) * (2.0 * std::f64::consts::PI / (np * sub) as f64);
                 let mass = env.pdf(d) as f64 * dw;
                 expected[(c / sub) * np + p / sub] += mass;
                 total += mass;

@@ -156,8 +156,8 @@ impl SceneFeatures {
             .into_iter()
             .any(|c| c.is_lit() && self.has(c));
         let punctual = self.point_lights + self.spot_lights + self.directional_lights > 0;
-        let area = transport == Transport::Path
-            && (self.area_light_primitives > 0 || self.environment);
+        let area =
+            transport == Transport::Path && (self.area_light_primitives > 0 || self.environment);
         lit && (punctual || area)
     }
 }

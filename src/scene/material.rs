@@ -13,7 +13,7 @@ use bevy_ecs::component::Component;
 use glam::{Vec2, Vec3};
 
 use crate::core::math::Color;
-use crate::transport::microfacet::{GltfBrdf, MIN_ALPHA};
+use crate::core::microfacet::{GltfBrdf, MIN_ALPHA};
 
 /// An RGB(A) image texture in linear space, sampled bilinearly with
 /// repeat wrapping.

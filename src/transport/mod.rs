@@ -5,6 +5,5 @@
 
 pub mod gooch;
 pub mod interaction;
-pub mod microfacet;
 pub mod path;
 pub mod whitted;

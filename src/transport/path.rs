@@ -28,9 +28,9 @@ use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::RenderSettings;
 use crate::scene::RenderScene;
-use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
 use crate::scene::environment::Environment;
-use crate::transport::whitted::direct_light_with;
+use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
+use crate::transport::whitted::{direct_light, direct_light_with};
 
 /// Probabilities of choosing each lobe of a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +48,7 @@ pub struct LobeChoice {
 impl LobeChoice {
     /// Proportional to each lobe's weight (luminance of its colour);
     /// all zero when the surface scatters nothing.
+    #[inline]
     pub fn new(it: &Interaction) -> Self {
         let s = &it.surface;
         let w = if let Some(g) = &s.gltf {
@@ -57,12 +58,12 @@ impl LobeChoice {
             [diffuse, specular, 0.0, s.transmission.max(0.0)]
         } else {
             [
-            luminance(s.diffuse).max(0.0),
-            luminance(s.specular).max(0.0),
-            luminance(s.mirror).max(0.0),
-            // The dielectric's reflection is untinted: weigh it by its
-            // transmission alone, so a dark tint still reflects.
-            s.transmission.max(0.0),
+                luminance(s.diffuse).max(0.0),
+                luminance(s.specular).max(0.0),
+                luminance(s.mirror).max(0.0),
+                // The dielectric's reflection is untinted: weigh it by its
+                // transmission alone, so a dark tint still reflects.
+                s.transmission.max(0.0),
             ]
         };
         let total: f32 = w.iter().sum();
@@ -275,99 +276,130 @@ pub fn next_event(
         return;
     }
     for light in scene.lights() {
-        if let Some(q) = direct_light_with(it, light, |wi| bsdf_cos(it, wi)) {
+        let q = if it.surface.gltf.is_some() {
+            direct_light_with(it, light, |wi| bsdf_cos(it, wi))
+        } else {
+            direct_light(it, light)
+        };
+        if let Some(q) = q {
             emit(q);
         }
     }
-    let environment = scene.environment();
-    if scene.emitters().is_empty() && environment.is_none() {
+    let n = settings.light_samples;
+    // One set of four per light sample: the point's pair first, then the
+    // light number.
+    let mut numbers = |i: u32| {
+        sampler.set_dimension(first + 4 * i);
+        let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
+        (v, sampler.next_f32())
+    };
+    let Some(env) = scene.environment() else {
+        if scene.emitters().is_empty() {
+            return;
+        }
+        for i in 0..n {
+            let (v, u) = numbers(i);
+            if let Some(q) = area_light_sample(scene, settings, it, lobes, (u, v), 1.0, depth) {
+                emit(q);
+            }
+        }
         return;
-    }
+    };
     // With an environment, the light number first picks it (with
     // probability `p_env`) or the area lights, then is stretched back to
     // [0, 1) for the area lights' own choice.
     let p_env = scene.environment_selection();
-    let n = settings.light_samples;
-    let inv_n = 1.0 / n as f32;
     for i in 0..n {
-        // One set of four per light sample: the point's pair first.
-        sampler.set_dimension(first + 4 * i);
-        let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
-        let mut u = sampler.next_f32();
-        let mut select = 1.0;
-        if let Some(env) = environment {
-            if u < p_env {
-                if let Some(q) = environment_sample(settings, it, lobes, env, p_env, v, depth, n) {
-                    emit(q);
-                }
-                continue;
-            }
-            u = ((u - p_env) / (1.0 - p_env)).min(1.0 - f32::EPSILON / 2.0);
-            select = 1.0 - p_env;
-        }
-        let Some(ls) = scene
-            .emitters()
-            .sample(scene.instances(), scene.materials(), u, v)
-        else {
-            continue;
-        };
-        let to = ls.point - it.point;
-        let dist2 = to.length_squared();
-        if !(dist2 > 0.0 && dist2.is_finite()) {
-            continue;
-        }
-        let dist = dist2.sqrt();
-        let wi = to / dist;
-        let cos_l = ls.normal.dot(wi).abs();
-        if it.ng.dot(wi) <= 0.0 || !(cos_l > 0.0) {
-            continue;
-        }
-        let f = bsdf_cos(it, wi);
-        if f == Color::ZERO {
-            continue;
-        }
-        let pdf_light = ls.pdf_area * dist2 / cos_l * select;
-        let w = if depth < settings.max_depth {
-            power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+        let (v, u) = numbers(i);
+        let q = if u < p_env {
+            environment_sample(settings, it, lobes, env, p_env, v, depth)
         } else {
-            1.0
+            let u = ((u - p_env) / (1.0 - p_env)).min(1.0 - f32::EPSILON / 2.0);
+            area_light_sample(scene, settings, it, lobes, (u, v), 1.0 - p_env, depth)
         };
-        let radiance = f * ls.radiance * (w * inv_n / pdf_light);
-        if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
-            continue;
+        if let Some(q) = q {
+            emit(q);
         }
-        // End the segment just short of the emitter, so that the emitter
-        // itself never counts as a blocker. The shadow ray's own hit on
-        // it is off by a few ulps of the largest of its origin, its length
-        // and the point, in the direction of the surface normal, which is
-        // that divided by the cosine along the ray: at grazing angles a
-        // fixed offset along the normal was not enough (seen: 11% of a
-        // sphere light's visible samples lost to self-shadowing, more when
-        // the light sat nearer the render origin than the receiver).
-        let origin = offset_origin_relative(it.point, it.ng);
-        let t_light = (ls.point - origin).dot(wi);
-        let scale = ls
-            .point
-            .abs()
-            .max_element()
-            .max(origin.abs().max_element())
-            .max(t_light);
-        let t_max = t_light - OFFSET_ULPS * f32::EPSILON * scale / cos_l;
-        if !(t_max > 0.0) {
-            continue;
-        }
-        emit(ShadowQuery {
-            ray: Ray::new(origin, wi),
-            t_max,
-            radiance,
-        });
     }
+}
+
+/// One next-event sample of the area lights, drawn with `u` (which light)
+/// and `v` (where on it), the area lights being chosen with probability
+/// `select` among all lights: a shadow ray to the point carrying its
+/// MIS-weighted radiance (full weight at the last vertex).
+#[inline]
+fn area_light_sample(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    (u, v): (f32, Vec2),
+    select: f32,
+    depth: u32,
+) -> Option<ShadowQuery> {
+    let n = settings.light_samples;
+    let ls = scene
+        .emitters()
+        .sample(scene.instances(), scene.materials(), u, v)?;
+    let to = ls.point - it.point;
+    let dist2 = to.length_squared();
+    if !(dist2 > 0.0 && dist2.is_finite()) {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    let wi = to / dist;
+    let cos_l = ls.normal.dot(wi).abs();
+    if it.ng.dot(wi) <= 0.0 || !(cos_l > 0.0) {
+        return None;
+    }
+    let f = if it.surface.gltf.is_some() {
+        bsdf_cos(it, wi)
+    } else {
+        brdf_cos(&it.surface, it.ns, it.wo, wi)
+    };
+    if f == Color::ZERO {
+        return None;
+    }
+    let pdf_light = ls.pdf_area * dist2 / cos_l * select;
+    let w = if depth < settings.max_depth {
+        power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+    } else {
+        1.0
+    };
+    let radiance = f * ls.radiance * (w * (1.0 / n as f32) / pdf_light);
+    if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
+        return None;
+    }
+    // End the segment just short of the emitter, so that the emitter
+    // itself never counts as a blocker. The shadow ray's own hit on
+    // it is off by a few ulps of the largest of its origin, its length
+    // and the point, in the direction of the surface normal, which is
+    // that divided by the cosine along the ray: at grazing angles a
+    // fixed offset along the normal was not enough (seen: 11% of a
+    // sphere light's visible samples lost to self-shadowing, more when
+    // the light sat nearer the render origin than the receiver).
+    let origin = offset_origin_relative(it.point, it.ng);
+    let t_light = (ls.point - origin).dot(wi);
+    let scale = ls
+        .point
+        .abs()
+        .max_element()
+        .max(origin.abs().max_element())
+        .max(t_light);
+    let t_max = t_light - OFFSET_ULPS * f32::EPSILON * scale / cos_l;
+    if !(t_max > 0.0) {
+        return None;
+    }
+    Some(ShadowQuery {
+        ray: Ray::new(origin, wi),
+        t_max,
+        radiance,
+    })
 }
 
 /// One next-event sample of the environment, drawn with `v`, chosen with
 /// probability `p_env` among the lights: a shadow ray to infinity carrying
 /// its MIS-weighted radiance (full weight at the last vertex).
-#[allow(clippy::too_many_arguments)]
 fn environment_sample(
     settings: &RenderSettings,
     it: &Interaction,
@@ -376,8 +408,8 @@ fn environment_sample(
     p_env: f32,
     v: Vec2,
     depth: u32,
-    n: u32,
 ) -> Option<ShadowQuery> {
+    let n = settings.light_samples;
     let es = env.sample(v)?;
     let wi = es.direction;
     if it.ng.dot(wi) <= 0.0 {
@@ -430,6 +462,7 @@ pub fn escaped(
 /// `prev_pdf` is the density with which the previous vertex drew this
 /// ray's direction (zero after the camera or a specular lobe: weight 1),
 /// `distance` the ray's length to the hit.
+#[inline]
 pub fn emitted(
     scene: &RenderScene,
     settings: &RenderSettings,

@@ -518,7 +518,10 @@ fn bad_environment_maps_fail_cleanly() {
     .unwrap();
     let scene = assets().join("whitted.toml");
     for (map, words) in [
-        (d.join("missing.hdr"), &["missing.hdr", "environment map"][..]),
+        (
+            d.join("missing.hdr"),
+            &["missing.hdr", "environment map"][..],
+        ),
         (zero, &["zero.hdr", "empty"][..]),
         (truncated, &["truncated.hdr"][..]),
         (garbage, &["garbage.hdr", "not a radiance"][..]),

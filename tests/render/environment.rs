@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use glam::{DVec3, Vec2, Vec3, Vec3A};
 use prism::core::math::Color;
+use prism::core::microfacet::GltfBrdf;
 use prism::core::settings::{RenderSettings, Transport};
 use prism::geometry::shapes::Shape;
 use prism::geometry::transform::Transform;
@@ -19,7 +20,6 @@ use prism::io::desc::{Geometry, ObjectDesc, SceneDesc};
 use prism::scene::camera::{Camera, CameraRays};
 use prism::scene::environment::{Environment, EnvironmentMap, EnvironmentSource, direction_to_uv};
 use prism::scene::material::Material;
-use prism::transport::microfacet::GltfBrdf;
 
 use crate::common::images::{assert_same_image, film_bits};
 use crate::common::render::{config, render_desc, render_toml};
@@ -112,7 +112,10 @@ fn environment_furnace_gives_rho_l() {
     let (rho, l) = (0.6f64, 1.5f64);
     for env in [
         "color = 1.5".to_string(),
-        format!("path = {:?}\nintensity = 3.0\nrotation = 30", map.display().to_string()),
+        format!(
+            "path = {:?}\nintensity = 3.0\nrotation = 30",
+            map.display().to_string()
+        ),
     ] {
         let scene = furnace_scene(&env, rho as f32);
         let s = settings(16, 16, 16, 3, Transport::Path);
@@ -219,7 +222,10 @@ material = {{ diffuse = 0, mirror = 1 }}
             );
         }
     }
-    assert!(bright >= 4 && checked > 9000, "{bright} bright of {checked}");
+    assert!(
+        bright >= 4 && checked > 9000,
+        "{bright} bright of {checked}"
+    );
 
     // The plane: direct light only (depth 0), albedo 1.
     let scene = format!(
@@ -292,7 +298,11 @@ fn no_discontinuity_at_the_seam_or_the_poles() {
     // RGBE rounding: 2^-8 relative of values up to 2.
     let tolerance = step * 1.001 + 2.0 / 128.0;
     for look_at in [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]] {
-        let up = if look_at[1] == 0.0 { [0, 1, 0] } else { [1, 0, 0] };
+        let up = if look_at[1] == 0.0 {
+            [0, 1, 0]
+        } else {
+            [1, 0, 0]
+        };
         let scene = format!(
             r#"
 [camera]
@@ -307,7 +317,10 @@ path = {:?}
         );
         let film = render_toml(
             &scene,
-            config(settings(48, 48, 1, 1, Transport::Whitted), IntegratorKind::Recursive),
+            config(
+                settings(48, 48, 1, 1, Transport::Whitted),
+                IntegratorKind::Recursive,
+            ),
         )
         .film
         .unwrap();
@@ -377,17 +390,16 @@ fn albedo(b: &GltfBrdf, cos_o: f32) -> f64 {
 #[test]
 fn gltf_furnaces() {
     let roughness = 0.6f32;
-    let metal = Material::from_metallic_roughness(
-        Color::ONE,
-        1.0,
-        roughness,
-        Color::splat(0.04),
-        0.0,
-        1.5,
-    );
-    let brdf = metal.sample(Vec2::ZERO).gltf.expect("a metal has a specular layer");
+    let metal =
+        Material::from_metallic_roughness(Color::ONE, 1.0, roughness, Color::splat(0.04), 0.0, 1.5);
+    let brdf = metal
+        .sample(Vec2::ZERO)
+        .gltf
+        .expect("a metal has a specular layer");
     // Expected albedo by viewing cosine, interpolated from a table.
-    let table: Vec<f64> = (0..=40).map(|k| albedo(&brdf, (k as f32 / 40.0).max(1e-3))).collect();
+    let table: Vec<f64> = (0..=40)
+        .map(|k| albedo(&brdf, (k as f32 / 40.0).max(1e-3)))
+        .collect();
     let e = |mu: f32| {
         let x = (mu.clamp(0.0, 1.0) * 40.0) as f64;
         let k = (x as usize).min(39);
@@ -427,13 +439,18 @@ fn gltf_furnaces() {
     let (desc, camera) = gltf_sphere(plastic, Environment::uniform(Color::splat(2.0)));
     let s = settings(16, 16, 16, 4, Transport::Path);
     for kind in IntegratorKind::ALL {
-        let film = render_desc(desc.clone(), config(s.clone(), kind)).film.unwrap();
+        let film = render_desc(desc.clone(), config(s.clone(), kind))
+            .film
+            .unwrap();
         let values: Vec<f64> = sphere_pixels(&film, &camera, 1.0)
             .iter()
             .map(|(i, _)| film.pixels[*i].y as f64)
             .collect();
         let (mean, err) = mean_and_error(&values);
-        assert!((mean - 2.0).abs() < 5.0 * err + 1e-5, "{kind:?}: {mean} +- {err}");
+        assert!(
+            (mean - 2.0).abs() < 5.0 * err + 1e-5,
+            "{kind:?}: {mean} +- {err}"
+        );
     }
 }
 
@@ -458,7 +475,14 @@ fn integrators_and_thread_counts_agree_with_an_environment() {
         material,
     };
     let mr = |m: f32, r: f32| {
-        Material::from_metallic_roughness(Color::new(0.9, 0.6, 0.3), m, r, Color::splat(0.04), 0.0, 1.5)
+        Material::from_metallic_roughness(
+            Color::new(0.9, 0.6, 0.3),
+            m,
+            r,
+            Color::splat(0.04),
+            0.0,
+            1.5,
+        )
     };
     let camera = Camera {
         look_from: DVec3::new(0.0, 1.0, 4.0),
@@ -493,7 +517,11 @@ fn integrators_and_thread_counts_agree_with_an_environment() {
             .build()
             .unwrap();
         for kind in IntegratorKind::ALL {
-            let f = pool.install(|| render_desc(desc.clone(), config(s.clone(), kind)).film.unwrap());
+            let f = pool.install(|| {
+                render_desc(desc.clone(), config(s.clone(), kind))
+                    .film
+                    .unwrap()
+            });
             films.push((threads, kind, f));
         }
     }

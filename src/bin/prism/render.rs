@@ -60,7 +60,9 @@ fn environment(args: &RenderArgs, scene: Option<Environment>) -> Result<Option<E
     let intensity = args.env_intensity.unwrap_or(intensity);
     let rotation = args.env_rotation.map_or(rotation, f32::to_radians);
     let source = match (&args.env, scene) {
-        (Some(path), _) => EnvironmentSource::Map(prism::io::environment::load_environment_map(path)?),
+        (Some(path), _) => {
+            EnvironmentSource::Map(prism::io::environment::load_environment_map(path)?)
+        }
         (None, Some(e)) => e.source().clone(),
         (None, None) if args.env_intensity.is_some() || args.env_rotation.is_some() => {
             return Err(Error::Invalid(
