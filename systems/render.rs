@@ -101,7 +101,7 @@ pub fn render_recursive(world: &mut World) {
 
 /// Adds `spp` samples to the running sums, after starting them again if
 /// anything changed: the scene (this frame's update), the camera, the
-/// settings or the background.
+/// settings, the background or the environment.
 fn render_progressive(
     world: &mut World,
     scene: &RenderScene,
@@ -109,13 +109,18 @@ fn render_progressive(
     config: &RenderConfig,
 ) {
     let changed = world.resource::<Frame>().update.changed();
-    let key = (config.settings.clone(), camera, config.background);
+    let key = (
+        config.settings.clone(),
+        camera,
+        config.background,
+        config.environment.clone(),
+    );
     let mut state = world.resource_mut::<AccumulationState>();
     if changed || state.key.as_ref() != Some(&key) {
         state.accumulator = Accumulator::new(config.settings.width, config.settings.height);
         state.key = Some(key);
     }
-    let (settings, camera, _) = state.key.clone().expect("just set");
+    let (settings, camera, _, _) = state.key.clone().expect("just set");
     let start = Instant::now();
     let counters = state.accumulator.add_samples(scene, &camera, &settings);
     let film = state.accumulator.film();

@@ -390,15 +390,17 @@ pub fn intersect_closest(
     });
 }
 
-/// Stage: background radiance for escaped rays; drains the escaped queue.
+/// Stage: background or environment radiance for escaped rays; drains
+/// the escaped queue.
 pub fn handle_escaped_rays(
+    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut escaped: ResMut<EscapedRays>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::HandleEscapedRays, |_| {
-        kernels::handle_escaped_rays(&escaped.0, frame.scene.background(), &mut radiance.0);
+        kernels::handle_escaped_rays(&frame.scene, &config.settings, &escaped.0, &mut radiance.0);
         escaped.0.clear();
     });
 }

@@ -29,7 +29,7 @@ pub fn trace(
     counters: &mut RenderCounters,
 ) -> Color {
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
-        return scene.background();
+        return scene.escaped_radiance(ray.direction);
     };
     let it = Interaction::new(scene, ray, &hit);
     let mut radiance = it.surface.emission;
@@ -79,7 +79,7 @@ pub fn trace_path(
     let mut depth = 0;
     loop {
         let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
-            radiance += throughput * scene.background();
+            radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
             return radiance;
         };
         let it = Interaction::new(scene, &ray, &hit);

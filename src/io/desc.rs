@@ -128,6 +128,9 @@ pub struct SceneDesc {
     pub cameras: Vec<Camera>,
     /// Radiance of rays that escape the scene.
     pub background: Color,
+    /// Light from infinitely far away (replaces `background` when
+    /// present).
+    pub environment: Option<crate::scene::environment::Environment>,
     /// Suggested settings.
     pub settings: SettingsDesc,
 }

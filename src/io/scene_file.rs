@@ -21,6 +21,7 @@ use crate::geometry::transform::Transform;
 use crate::image::output::srgb_to_linear;
 use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc, SettingsDesc};
 use crate::scene::camera::Camera;
+use crate::scene::environment::{Environment, EnvironmentSource};
 use crate::scene::light::Light;
 use crate::scene::material::{ImageTexture, Material, Texture, UvTransform};
 
@@ -38,6 +39,20 @@ struct FileScene {
     lights: Vec<FileLight>,
     #[serde(default)]
     gltf: Vec<FileInclude>,
+    environment: Option<FileEnvironment>,
+}
+
+/// `[environment]`: an equirectangular map (`path`) or a uniform `color`,
+/// scaled by `intensity` and turned by `rotation` degrees about +Y.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileEnvironment {
+    path: Option<PathBuf>,
+    color: Option<FileColor>,
+    #[serde(default = "one")]
+    intensity: f32,
+    #[serde(default)]
+    rotation: f32,
 }
 
 #[derive(Deserialize, Default)]
@@ -409,6 +424,9 @@ impl Ctx<'_> {
             scene.background =
                 non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
         }
+        if let Some(env) = &file.environment {
+            scene.environment = Some(self.environment(env)?);
+        }
         if let Some(c) = &file.camera {
             scene.cameras.push(self.camera(c).map_err(|m| self.err(m))?);
         }
@@ -586,6 +604,39 @@ impl Ctx<'_> {
                 })
             }
         }
+    }
+
+    fn environment(&self, e: &FileEnvironment) -> Result<Environment> {
+        if !(e.intensity.is_finite() && e.intensity >= 0.0) {
+            return Err(self.err(format!(
+                "environment.intensity must be finite and non-negative, got {}",
+                e.intensity
+            )));
+        }
+        if !e.rotation.is_finite() {
+            return Err(self.err(format!(
+                "environment.rotation must be finite, got {}",
+                e.rotation
+            )));
+        }
+        let source = match (&e.path, e.color) {
+            (Some(path), None) => EnvironmentSource::Map(
+                crate::io::environment::load_environment_map(&self.base.join(path))?,
+            ),
+            (None, Some(c)) => EnvironmentSource::Uniform(
+                non_negative("environment.color", c.get()).map_err(|m| self.err(m))?,
+            ),
+            _ => {
+                return Err(self.err(
+                    "[environment] needs exactly one of `path` (an .hdr or .exr map) and `color`",
+                ));
+            }
+        };
+        Ok(Environment::new(
+            source,
+            e.intensity,
+            e.rotation.to_radians(),
+        ))
     }
 
     fn material(&self, m: &FileMaterial) -> std::result::Result<Material, String> {

@@ -13,6 +13,7 @@ use bevy_ecs::component::Component;
 use glam::{Vec2, Vec3};
 
 use crate::core::math::Color;
+use crate::core::microfacet::{GltfBrdf, MIN_ALPHA};
 
 /// An RGB(A) image texture in linear space, sampled bilinearly with
 /// repeat wrapping.
@@ -172,6 +173,10 @@ pub struct MetallicRoughness {
     pub texture: Option<Texture>,
     /// Dielectric F0 (0.04 scaled by `KHR_materials_specular`).
     pub dielectric_f0: Color,
+    /// `KHR_materials_specular`'s factor (1 without the extension): the
+    /// dielectric's F90 in path transport's microfacet BRDF, by which
+    /// `dielectric_f0` is already scaled.
+    pub specular_factor: f32,
 }
 
 impl Default for Material {
@@ -245,6 +250,13 @@ pub struct SurfaceSample {
     pub base: Color,
     /// Weight of the diffuse lobe: `diffuse` is `base` times this.
     pub diffuse_weight: f32,
+    /// The glTF metallic-roughness BRDF, which path transport uses in
+    /// place of the Whitted lobes `diffuse`, `specular` and `mirror`
+    /// (Whitted transport keeps those). `None` for the project's own
+    /// materials and for glTF surfaces without a specular layer (metallic
+    /// 0 and `KHR_materials_specular` 0, or full transmission): those are
+    /// exactly Lambertian.
+    pub gltf: Option<GltfBrdf>,
 }
 
 /// The Whitted lobes that a glTF metallic-roughness surface maps to.
@@ -324,6 +336,7 @@ impl Material {
                 roughness,
                 texture: None,
                 dielectric_f0,
+                specular_factor: 1.0,
             }),
             ..Default::default()
         }
@@ -369,6 +382,7 @@ impl Material {
             let transmission = self.transmission;
             let lobes =
                 map_metallic_roughness(base, metallic, roughness, mr.dielectric_f0, transmission);
+            let gltf = gltf_brdf(base, metallic, roughness, mr, transmission);
             return SurfaceSample {
                 diffuse: lobes.diffuse,
                 specular: lobes.specular,
@@ -380,6 +394,7 @@ impl Material {
                 emission,
                 base,
                 diffuse_weight: (1.0 - metallic.clamp(0.0, 1.0)) * (1.0 - transmission),
+                gltf,
             };
         }
         SurfaceSample {
@@ -393,6 +408,37 @@ impl Material {
             emission,
             base,
             diffuse_weight: self.diffuse,
+            gltf: None,
         }
     }
+}
+
+/// The glTF BRDF of a metallic-roughness surface at one point, or `None`
+/// when it has no specular layer (then its path-traced BRDF is the
+/// Lambertian `diffuse` lobe, exactly as before the microfacet model).
+fn gltf_brdf(
+    base: Color,
+    metallic: f32,
+    roughness: f32,
+    mr: &MetallicRoughness,
+    transmission: f32,
+) -> Option<GltfBrdf> {
+    let metallic = metallic.clamp(0.0, 1.0);
+    let roughness = roughness.clamp(0.0, 1.0);
+    let w = mr.specular_factor.max(0.0);
+    let dielectric_weight = (1.0 - metallic) * (1.0 - transmission);
+    if !(metallic > 0.0 || (dielectric_weight > 0.0 && w > 0.0)) {
+        return None;
+    }
+    Some(GltfBrdf {
+        alpha: (roughness * roughness).max(MIN_ALPHA),
+        metallic,
+        metal_f0: base,
+        dielectric_weight,
+        // `dielectric_f0` is `w * F0(ior) * colour`; the specification
+        // clamps `F0(ior) * colour` to 1 before weighting.
+        dielectric_f0: mr.dielectric_f0.min(Color::splat(w)),
+        dielectric_f90: w,
+        diffuse: base * dielectric_weight,
+    })
 }

@@ -618,4 +618,101 @@ fn overlay_image_and_svg_are_written_whole() {
     assert_success(&o);
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.contains(r#"class="triangle visible""#) && !text.contains("triangle hidden"));
+/// Bad environment maps and options, given with `--env` or in a scene's
+/// `[environment]`: a clear error naming the problem, no output file.
+#[test]
+fn bad_environment_maps_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out_file = d.join("a.png");
+    let hdr = |name: &str, bytes: &[u8]| {
+        let p = d.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n".to_vec();
+    let zero = hdr("zero.hdr", &[&header[..], b"-Y 0 +X 0\n"].concat());
+    let mut flat = [&header[..], b"-Y 2 +X 4\n"].concat();
+    flat.extend([128u8, 128, 128, 129].repeat(3));
+    let truncated = hdr("truncated.hdr", &flat);
+    let garbage = hdr("garbage.hdr", b"this is not an image");
+    let nan = d.join("nan.exr");
+    image::DynamicImage::ImageRgb32F(image::Rgb32FImage::from_fn(4, 2, |x, _| {
+        image::Rgb([1.0, if x == 3 { f32::NAN } else { 0.5 }, 1.0])
+    }))
+    .save(&nan)
+    .unwrap();
+    let scene = assets().join("whitted.toml");
+    for (map, words) in [
+        (
+            d.join("missing.hdr"),
+            &["missing.hdr", "environment map"][..],
+        ),
+        (zero, &["zero.hdr", "empty"][..]),
+        (truncated, &["truncated.hdr"][..]),
+        (garbage, &["garbage.hdr", "not a radiance"][..]),
+        (nan, &["nan.exr", "column 3, row 0 is nan"][..]),
+    ] {
+        let out = render(&scene, &out_file, &["--env", map.to_str().unwrap()]);
+        assert_clean_failure(&out, &out_file, words);
+        // The same map named by a scene file.
+        let toml = d.join("env.toml");
+        std::fs::write(
+            &toml,
+            format!(
+                "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\npath = {:?}\n",
+                map.file_name().unwrap().to_str().unwrap()
+            ),
+        )
+        .unwrap();
+        assert_clean_failure(&render(&toml, &out_file, &[]), &out_file, words);
+    }
+    for (extra, words) in [
+        (&["--env-intensity", "-1"][..], &["--env-intensity"][..]),
+        (&["--env-rotation", "nan"][..], &["--env-rotation"][..]),
+        (&["--env-intensity", "2"][..], &["need an environment"][..]),
+    ] {
+        assert_clean_failure(&render(&scene, &out_file, extra), &out_file, words);
+    }
+    let toml = d.join("both.toml");
+    std::fs::write(
+        &toml,
+        "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\ncolor = 1\npath = \"a.hdr\"\n",
+    )
+    .unwrap();
+    assert_clean_failure(&render(&toml, &out_file, &[]), &out_file, &["exactly one"]);
+}
+
+/// `--env` with the sample map renders a finite image (skipped when the
+/// samples are absent).
+#[test]
+fn the_sample_environment_map_renders() {
+    let map = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/samples/envmaps/spiaggia_di_mondello_1k.hdr");
+    if !map.exists() {
+        eprintln!("skipped: {} is absent", map.display());
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("a.exr");
+    let out = render(
+        &assets().join("whitted.toml"),
+        &out_file,
+        &[
+            "--env",
+            map.to_str().unwrap(),
+            "--env-rotation",
+            "90",
+            "--transport",
+            "path",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ],
+    );
+    assert_success(&out);
+    let img = image::open(&out_file).unwrap().to_rgb32f();
+    assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
+    assert!(img.pixels().any(|p| p.0[1] > 0.1));
 }

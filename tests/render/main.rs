@@ -28,6 +28,7 @@
 mod common;
 
 mod analytic;
+mod environment;
 mod illustration;
 mod large_worlds;
 mod overlay;

@@ -14,6 +14,7 @@ use prism::geometry::mesh::BuildQuality;
 use prism::image::output::OutputFormat;
 use prism::image::shard::Manifest;
 use prism::io::desc::{Geometry, SettingsDesc};
+use prism::scene::environment::{Environment, EnvironmentSource};
 use prism::systems::wavefront::BatchSize;
 use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
@@ -35,6 +36,43 @@ enum RenderOriginArg {
     Camera,
     /// At the world origin.
     World,
+}
+
+/// The environment to render with: the scene's, replaced by `--env` and
+/// adjusted by `--env-intensity` and `--env-rotation`.
+fn environment(args: &RenderArgs, scene: Option<Environment>) -> Result<Option<Environment>> {
+    if let Some(x) = args.env_intensity
+        && !(x.is_finite() && x >= 0.0)
+    {
+        return Err(Error::Invalid(format!(
+            "--env-intensity must be finite and non-negative, got {x}"
+        )));
+    }
+    if let Some(r) = args.env_rotation
+        && !r.is_finite()
+    {
+        return Err(Error::Invalid(format!(
+            "--env-rotation must be finite, got {r}"
+        )));
+    }
+    let (intensity, rotation) = scene
+        .as_ref()
+        .map_or((1.0, 0.0), |e| (e.intensity(), e.rotation()));
+    let intensity = args.env_intensity.unwrap_or(intensity);
+    let rotation = args.env_rotation.map_or(rotation, f32::to_radians);
+    let source = match (&args.env, scene) {
+        (Some(path), _) => {
+            EnvironmentSource::Map(prism::io::environment::load_environment_map(path)?)
+        }
+        (None, Some(e)) => e.source().clone(),
+        (None, None) if args.env_intensity.is_some() || args.env_rotation.is_some() => {
+            return Err(Error::Invalid(
+                "--env-intensity and --env-rotation need an environment: give --env FILE or an [environment] in the scene".into(),
+            ));
+        }
+        (None, None) => return Ok(None),
+    };
+    Ok(Some(Environment::new(source, intensity, rotation)))
 }
 
 /// Options of `prism render`.
@@ -184,6 +222,20 @@ pub struct RenderArgs {
     /// (precision falls with the distance to it; for comparison).
     #[arg(long, value_enum, default_value_t = RenderOriginArg::Camera)]
     render_origin: RenderOriginArg,
+    /// Light the scene with an equirectangular environment map (Radiance
+    /// .hdr or OpenEXR .exr, +Y up, the map's centre seen looking along +X),
+    /// replacing the scene's [environment] and background. Path transport
+    /// samples it as a light; Whitted transport only sees it in escaped
+    /// rays (mirrors, glass and the background).
+    #[arg(long, value_name = "FILE")]
+    env: Option<PathBuf>,
+    /// Scale of the environment's radiance [default: the scene's, else 1].
+    #[arg(long, value_name = "X", allow_hyphen_values = true)]
+    env_intensity: Option<f32>,
+    /// Turn of the environment about +Y in degrees, right-handed
+    /// [default: the scene's, else 0].
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+    env_rotation: Option<f32>,
     /// Write timings, ray counts and scene sizes as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -365,12 +417,13 @@ fn render_with_pool(
             .map(Into::into)
             .or(overlay_request.as_ref().and_then(|o| o.kind.accel())),
     };
-    let (desc, scene_hash) = if args.is_shard() {
+    let (mut desc, scene_hash) = if args.is_shard() {
         let (desc, hash) = prism::io::load_with_digest(&args.scene, options)?;
         (desc, Some(hash))
     } else {
         (prism::io::load(&args.scene, options)?, None)
     };
+    desc.environment = environment(args, desc.environment.take())?;
     // What the meshes were built with (the scene's choice when no --accel).
     let mut mesh_accel = options.accel.or(desc.settings.accel).unwrap_or_default();
     let mut accel_bytes = 0;

@@ -94,6 +94,9 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
         ior,
     );
     material.emission = emission;
+    if let Some(mr) = material.metallic_roughness.as_mut() {
+        mr.specular_factor = specular_factor;
+    }
     if let Some(info) = pbr.base_color_texture() {
         material.base_color_texture = Some(texture(
             ctx,
