@@ -26,6 +26,7 @@ mod common;
 mod analytic;
 mod illustration;
 mod large_worlds;
+mod models;
 mod path;
 mod robustness;
 mod scene_updates;
