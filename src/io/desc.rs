@@ -162,14 +162,16 @@ impl SceneDesc {
         (lo.cmple(hi).all()).then_some((lo, hi))
     }
 
-    /// True when something in the scene gives light: a punctual light or
-    /// an emissive material.
-    pub fn has_light(&self) -> bool {
+    /// True when the scene is lit under `transport`: it has a punctual
+    /// light, or (path transport only, where emissive surfaces are area
+    /// lights) an emissive surface.
+    pub fn is_lit(&self, transport: crate::core::settings::Transport) -> bool {
         !self.lights.is_empty()
-            || self
-                .objects
-                .iter()
-                .any(|o| o.material.emission.max_element() > 0.0)
+            || (transport == crate::core::settings::Transport::Path
+                && self
+                    .objects
+                    .iter()
+                    .any(|o| o.material.emission.max_element() > 0.0))
     }
 
     /// Gives a scene without a camera one, the way glTF viewers show a
@@ -192,11 +194,15 @@ impl SceneDesc {
         ))
     }
 
-    /// Gives a scene without light (no punctual light and no emissive
-    /// surface) the lights of [`default_lights`] for `camera`. Returns a
-    /// notice for standard error when it added them.
-    pub fn ensure_light(&mut self, camera: &Camera) -> Option<String> {
-        if self.has_light() {
+    /// Gives a scene that is not lit under `transport`
+    /// ([`SceneDesc::is_lit`]) the lights of [`default_lights`] for
+    /// `camera`. Returns a notice for standard error when it added them.
+    pub fn ensure_light(
+        &mut self,
+        camera: &Camera,
+        transport: crate::core::settings::Transport,
+    ) -> Option<String> {
+        if self.is_lit(transport) {
             return None;
         }
         let (lights, what) = default_lights(camera);

@@ -463,7 +463,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     }
     args.view.apply(&mut desc.cameras[args.camera])?;
     let chosen = desc.cameras[args.camera].clone();
-    if let Some(n) = desc.ensure_light(&chosen) {
+    if let Some(n) = desc.ensure_light(&chosen, settings.transport) {
         eprintln!("notice: {}: {n}", args.scene.display());
     }
     let light_count = desc.lights.len();
