@@ -223,7 +223,7 @@ impl SceneDesc {
 /// facing it has radiance `E / pi`, about 1.
 pub const DEFAULT_KEY_LUX: f32 = std::f32::consts::PI;
 
-/// The lights a scene without any gets ([`SceneDesc::complete_for_viewing`]),
+/// The lights an unlit scene gets ([`SceneDesc::ensure_light`]),
 /// and a few words saying what they are: one directional "key" light of
 /// [`DEFAULT_KEY_LUX`] lux, white, shining from behind the camera's left
 /// shoulder (from the eye's side, rotated 30 degrees up and 30 degrees to
