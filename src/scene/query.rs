@@ -64,8 +64,11 @@ impl RenderScene {
         brute_force: bool,
     ) -> Option<(f32, LocalHit)> {
         let inst = &self.instances[index as usize];
+        if self.has_alpha(inst) {
+            return self.intersect_cut_out::<AVX>(index, ray, t_min, t_max, brute_force);
+        }
         let local = to_object(inst, ray);
-        let find = |t_min: f32| match &inst.geometry {
+        match &inst.geometry {
             InstanceGeometry::Shape(s) => s
                 .intersect(&local, t_min, t_max)
                 .map(|h| (h.t, LocalHit::shape(&h))),
@@ -75,14 +78,39 @@ impl RenderScene {
                 m.intersect_kernel::<AVX>(&local, t_min, t_max)
             }
             .map(|h| (h.t, LocalHit::Mesh(h))),
-        };
-        if !self.has_alpha(inst) {
-            return find(t_min);
         }
-        // Each skipped hit raises t_min strictly, so this ends.
+    }
+
+    /// [`RenderScene::intersect_instance_with`] for an instance whose
+    /// material has an alpha mode: the closest hit that is not cut away,
+    /// found by searching again beyond each cut-away hit (each raises
+    /// `t_min` strictly, so this ends). Kept out of line: scenes without
+    /// alpha never call it.
+    #[cold]
+    #[inline(never)]
+    fn intersect_cut_out<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        brute_force: bool,
+    ) -> Option<(f32, LocalHit)> {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
         let mut t_min = t_min;
         loop {
-            let (t, h) = find(t_min)?;
+            let (t, h) = match &inst.geometry {
+                InstanceGeometry::Shape(s) => s
+                    .intersect(&local, t_min, t_max)
+                    .map(|h| (h.t, LocalHit::shape(&h))),
+                InstanceGeometry::Mesh(m) => if brute_force {
+                    m.intersect_brute_force(&local, t_min, t_max)
+                } else {
+                    m.intersect_kernel::<AVX>(&local, t_min, t_max)
+                }
+                .map(|h| (h.t, LocalHit::Mesh(h))),
+            }?;
             if !self.cut_away(inst, ray, t, &h) {
                 return Some((t, h));
             }
@@ -556,7 +584,10 @@ impl RenderScene {
 /// frame (tangent, bitangent, normal) with the bitangent
 /// `tangent.w * cross(normal, tangent)` built in object space and both
 /// carried to world space as vectors. A mapped normal that would face
-/// away from the geometric side (or a degenerate frame) keeps `sn`.
+/// away from the geometric side (or a degenerate frame) keeps `sn`. Out
+/// of line: hits without normal maps only pay for the check.
+#[cold]
+#[inline(never)]
 fn normal_mapped(
     map: &crate::scene::material::NormalMap,
     s: &crate::geometry::mesh::MeshSurface,
