@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::{Progress, accumulate, camera_rays, film_sample};
+use super::{Progress, accumulate, camera_ray, camera_rays};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
@@ -122,7 +122,7 @@ pub fn pixel_sample(
 ) -> Color {
     let pixel = y * settings.width + x;
     let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
-    let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
+    let ray = camera_ray(cam, x, y, spp, &mut sampler);
     counters.rays.camera += 1;
     match settings.transport {
         Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),

@@ -136,6 +136,14 @@ struct FileCamera {
     up: [f32; 3],
     #[serde(default = "default_vfov")]
     vfov: f32,
+    /// Thin lens: aperture radius in scene units (0: pinhole).
+    aperture_radius: Option<f32>,
+    /// Thin lens: f-number (see `Camera::set_f_number`).
+    f_number: Option<f32>,
+    /// Thin lens: distance of the plane in focus (default: to `look_at`).
+    focus_distance: Option<f32>,
+    /// Orthographic projection: half the height of the view, in scene units.
+    ortho_half_height: Option<f32>,
 }
 
 fn default_up() -> [f32; 3] {
@@ -562,7 +570,26 @@ impl Ctx<'_> {
             up: finite3("camera.up", c.up)?,
             vfov_degrees: c.vfov,
             name: None,
+            focus_distance: c.focus_distance.unwrap_or(0.0),
+            ..Default::default()
         };
+        let mut cam = cam;
+        match (c.aperture_radius, c.f_number) {
+            (Some(_), Some(_)) => {
+                return Err("camera: give aperture_radius or f_number, not both".into());
+            }
+            (Some(r), None) => cam.lens_radius = r,
+            (None, Some(n)) => {
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(format!("camera.f_number must be positive, got {n}"));
+                }
+                cam.set_f_number(n);
+            }
+            (None, None) => {}
+        }
+        if let Some(h) = c.ortho_half_height {
+            cam.projection = crate::scene::camera::Projection::Orthographic { half_height: h };
+        }
         cam.validate()?;
         Ok(cam)
     }
@@ -595,12 +622,9 @@ impl Ctx<'_> {
                     .map(|p| Color::new(p[0], p[1], p[2]).map(srgb_to_linear))
                     .collect();
                 Ok(Texture::Image {
-                    image: Arc::new(ImageTexture {
-                        width,
-                        height,
-                        texels,
-                    }),
+                    image: Arc::new(ImageTexture::new(width, height, texels)),
                     transform: UvTransform::default(),
+                    sampler: Default::default(),
                 })
             }
         }

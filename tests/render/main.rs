@@ -32,6 +32,7 @@ mod environment;
 mod illustration;
 mod large_worlds;
 mod overlay;
+mod models;
 mod path;
 mod robustness;
 mod scene_updates;

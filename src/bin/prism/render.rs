@@ -75,6 +75,92 @@ fn environment(args: &RenderArgs, scene: Option<Environment>) -> Result<Option<E
     Ok(Some(Environment::new(source, intensity, rotation)))
 }
 
+/// Camera overrides of `prism render`, applied to the chosen camera
+/// (the scene's, or the automatic one of a scene without a camera).
+#[derive(clap::Args, Debug, Default)]
+pub struct ViewFlags {
+    /// Eye position X,Y,Z (world coordinates) [default: the camera's; a
+    /// scene without a camera is framed from +Z, see the README].
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    look_from: Option<Vec<f64>>,
+    /// Point looked at X,Y,Z [default: the camera's; the centre of the
+    /// scene's bounds for the automatic camera].
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    look_at: Option<Vec<f64>>,
+    /// Vertical field of view in degrees, in (0, 180) [default: the
+    /// camera's; 40 for the automatic camera].
+    #[arg(long, value_name = "DEG")]
+    fov: Option<f32>,
+    /// Depth of field: radius of the thin lens's aperture in scene units
+    /// (0: pinhole, the same image bit for bit) [default: the camera's, 0].
+    #[arg(long, value_name = "R", conflicts_with = "f_number")]
+    aperture_radius: Option<f32>,
+    /// Depth of field: the aperture as an f-number N, radius f/(2N) with
+    /// the focal length f of a 36x24 mm camera of the same field of view.
+    #[arg(long, value_name = "N")]
+    f_number: Option<f32>,
+    /// Depth of field: distance of the plane in focus along the viewing
+    /// direction [default: the camera's, else the distance to its look-at
+    /// point].
+    #[arg(long, value_name = "D")]
+    focus_distance: Option<f32>,
+}
+
+impl ViewFlags {
+    /// Applies the overrides to `camera` and checks the result.
+    fn apply(&self, camera: &mut prism::scene::camera::Camera) -> Result<()> {
+        let point = |name: &str, v: &Option<Vec<f64>>| -> Result<Option<glam::DVec3>> {
+            match v {
+                None => Ok(None),
+                Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
+                    Ok(Some(glam::DVec3::new(v[0], v[1], v[2])))
+                }
+                Some(v) => Err(Error::Invalid(format!(
+                    "--{name} takes three finite numbers x,y,z, got {v:?}"
+                ))),
+            }
+        };
+        if let Some(p) = point("look-from", &self.look_from)? {
+            camera.look_from = p;
+        }
+        if let Some(p) = point("look-at", &self.look_at)? {
+            camera.look_at = p;
+        }
+        if let Some(f) = self.fov {
+            camera.vfov_degrees = f;
+        }
+        if let Some(d) = self.focus_distance {
+            camera.focus_distance = d;
+        }
+        if let Some(r) = self.aperture_radius {
+            camera.lens_radius = r;
+        }
+        if let Some(n) = self.f_number {
+            if !(n.is_finite() && n > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "--f-number must be a positive number, got {n}"
+                )));
+            }
+            camera.set_f_number(n);
+        }
+        camera.validate().map_err(|e| {
+            Error::Invalid(format!(
+                "the camera after --look-from/--look-at/--fov/lens options: {e}"
+            ))
+        })
+    }
+}
+
 /// Options of `prism render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -100,6 +186,9 @@ pub struct RenderArgs {
     /// scene file's own camera first, then those of included glTF files).
     #[arg(long, default_value_t = 0)]
     camera: usize,
+    /// `--look-from`, `--look-at`, `--fov` and the lens.
+    #[command(flatten)]
+    view: ViewFlags,
     /// Exposure in stops for PNG output: radiance is scaled by 2^EV
     /// [default: the scene's, else 0].
     #[arg(long, value_name = "EV", allow_hyphen_values = true)]
@@ -515,20 +604,24 @@ fn render_with_pool(
         ))
     })?;
     let png = png_options(args.exposure.or(s.exposure).unwrap_or(0.0), args.tonemap)?;
-    // The CLI's own words for camera problems, before Renderer::with_scene
-    // would give its more general ones.
-    let camera_count = desc.cameras.len();
-    if camera_count == 0 {
-        return Err(Error::load(
-            &args.scene,
-            "the scene has no camera (add a [camera] table or a glTF camera)",
-        ));
+    // A bare model gets a camera framing it and a light, like in a glTF
+    // viewer; the CLI's own words for camera problems, before
+    // Renderer::with_scene would give its more general ones.
+    let aspect = settings.width as f64 / settings.height as f64;
+    if let Some(n) = desc.ensure_camera(aspect) {
+        eprintln!("notice: {}: {n}", args.scene.display());
     }
+    let camera_count = desc.cameras.len();
     if args.camera >= camera_count {
         return Err(Error::Invalid(format!(
             "--camera {}: the scene has {camera_count} camera(s), numbered from 0",
             args.camera
         )));
+    }
+    args.view.apply(&mut desc.cameras[args.camera])?;
+    let chosen = desc.cameras[args.camera].clone();
+    if let Some(n) = desc.ensure_light(&chosen, settings.transport) {
+        eprintln!("notice: {}: {n}", args.scene.display());
     }
     let light_count = desc.lights.len();
     let camera = desc.cameras[args.camera].clone();
