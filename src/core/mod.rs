@@ -6,6 +6,7 @@ pub mod clip;
 pub mod error;
 pub mod math;
 pub mod optics;
+pub mod photon_settings;
 pub mod rng;
 pub mod sampling;
 pub mod settings;

@@ -3,6 +3,7 @@
 
 pub mod counters;
 pub mod lines;
+pub mod photon;
 pub mod progressive;
 pub mod recursive;
 pub mod vector_lines;
