@@ -18,7 +18,7 @@ fn render(name: &str, settings: &RenderSettings) -> Film {
     frame.film.unwrap()
 }
 
-/// Mean luminance-free average of all channels of every pixel.
+/// Mean over every pixel of the average of its three channels.
 fn mean(f: &Film) -> f64 {
     f.pixels
         .iter()
@@ -45,16 +45,21 @@ fn block_means(f: &Film, b: u32) -> Vec<f64> {
     out
 }
 
-/// The diffuse Cornell box under photon mapping (with final gathering)
-/// agrees with the path tracer: the image means within 1%, and the mean
-/// relative error of the 8x8-pixel block means within 5% (kernel blur at
-/// the box's edges and corners and photon noise are what remains; the
-/// README states the figures at full size).
+/// The diffuse Cornell box under photon mapping, with direct
+/// visualisation and with final gathering, agrees with the path tracer:
+/// the image means within 1%, and the mean relative error of the 8x8-pixel
+/// block means within 3% (measured: 0.7% for both at these settings; the
+/// README states the figures at 128x128). Both renders take the same 256
+/// camera samples per pixel (photon: 32 per iteration over 8 iterations,
+/// the same sample indices and so the same film positions), so the
+/// emitter's coverage of its edge pixels, which dominates the image mean,
+/// is the same in both.
 #[test]
 fn cornell_box_agrees_with_the_path_tracer() {
     let base = RenderSettings {
         width: 32,
         height: 32,
+        spp: 256,
         max_depth: 8,
         seed: 3,
         min_contribution: 0.0,
@@ -63,34 +68,37 @@ fn cornell_box_agrees_with_the_path_tracer() {
     let path = render(
         "cornell.toml",
         &RenderSettings {
-            spp: 256,
             transport: Transport::Path,
             ..base.clone()
         },
     );
-    let mut photon = RenderSettings {
-        spp: 1,
-        transport: Transport::Photon,
-        ..base
-    };
-    photon.photon.photons = 40_000;
-    photon.photon.iterations = 8;
-    photon.photon.gather_rays = 8;
-    photon.photon.radius = Some(0.1);
-    let pm = render("cornell.toml", &photon);
-    let (mp, mm) = (mean(&path), mean(&pm));
-    assert!(
-        (mm - mp).abs() < 0.01 * mp,
-        "image mean: photon {mm}, path {mp}"
-    );
-    let (bp, bm) = (block_means(&path, 8), block_means(&pm, 8));
-    let rel: f64 = bp
-        .iter()
-        .zip(&bm)
-        .map(|(p, m)| (m - p).abs() / p.max(1e-3))
-        .sum::<f64>()
-        / bp.len() as f64;
-    assert!(rel < 0.05, "8x8 block mean relative error {rel}");
+    for gather in [0, 1] {
+        let mut photon = RenderSettings {
+            spp: 32,
+            transport: Transport::Photon,
+            ..base.clone()
+        };
+        photon.photon.photons = 20_000;
+        photon.photon.iterations = 8;
+        photon.photon.gather_rays = gather;
+        let pm = render("cornell.toml", &photon);
+        let (mp, mm) = (mean(&path), mean(&pm));
+        assert!(
+            (mm - mp).abs() < 0.01 * mp,
+            "gather {gather}: image mean: photon {mm}, path {mp}"
+        );
+        let (bp, bm) = (block_means(&path, 8), block_means(&pm, 8));
+        let rel: f64 = bp
+            .iter()
+            .zip(&bm)
+            .map(|(p, m)| (m - p).abs() / p.max(1e-3))
+            .sum::<f64>()
+            / bp.len() as f64;
+        assert!(
+            rel < 0.03,
+            "gather {gather}: 8x8 block mean relative error {rel}"
+        );
+    }
 }
 
 /// The caustic scene renders the same bits with one thread and with two
