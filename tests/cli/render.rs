@@ -499,7 +499,7 @@ fn photon_options_reject_bad_input_cleanly() {
     let dir = tempfile::tempdir().unwrap();
     let scene = assets().join("caustic.toml");
     let out = dir.path().join("c.png");
-    let small = ["--width", "8", "--height", "6", "--photons", "100"];
+    let small = ["--width", "8", "--height", "6"];
     let cases: &[(&[&str], &[&str])] = &[
         (&["--photons", "0"], &["photons per iteration"]),
         (&["--photon-radius", "0"], &["radius"]),
