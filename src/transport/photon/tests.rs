@@ -105,7 +105,7 @@ fn point_light_irradiance_at_the_foot_point() {
 /// 4 of them allowed.
 #[test]
 fn directional_light_irradiance() {
-    let (e0, n, r) = (3.0f32, 200_000u32, 0.5f32);
+    let (e0, n, r) = (3.0f32, 400_000u32, 1.0f32);
     let sc = scene(
         vec![(square(2.0, 0.0, 1), Transform::default(), 0)],
         vec![Material::default()],
