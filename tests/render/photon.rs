@@ -108,13 +108,14 @@ fn cornell_box_agrees_with_the_path_tracer() {
 fn caustic_scene_is_bit_identical_across_thread_counts() {
     for gather in [0, 2] {
         let mut s = RenderSettings {
-            width: 24,
-            height: 18,
+            width: 48,
+            height: 36,
             spp: 1,
             transport: Transport::Photon,
             ..Default::default()
         };
-        s.photon.photons = 5_000;
+        // Several photon chunks and many rows, so both threads get work.
+        s.photon.photons = 12_300;
         s.photon.iterations = 2;
         s.photon.gather_rays = gather;
         let films: Vec<Film> = [1, 2]
