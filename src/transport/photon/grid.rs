@@ -10,8 +10,10 @@
 //!
 //! Why not a kd-tree: a kd-tree answers k-nearest queries, which
 //! progressive photon mapping does not need, and its build sorts (`O(n log
-//! n)`); with one radius for every query a grid visits a fixed number of
-//! cells. `benches/photon_map.rs`-style measurements are in the README.
+//! n)`), once per iteration; with one radius for every query a grid visits
+//! a fixed number of cells. Measured by `examples/photon_lookup.rs`
+//! against a balanced kd-tree (figures in the README, "Photon mapping"):
+//! the grid builds 4 to 16 times faster and queries as fast or faster.
 //!
 //! The order of photons within a bucket is their order in the input, and
 //! queries visit buckets in a fixed order, so sums over a query's photons
