@@ -1,6 +1,7 @@
 //! Compares a test EXR with a reference EXR of the same size by the image
 //! means and the mean relative error of the `B` x `B` block means (the
-//! figures the README gives for photon mapping against the path tracer).
+//! figures the README gives for photon mapping against the path tracer),
+//! and the five blocks with the largest errors.
 //!
 //! `cargo run --release --example block_error -- TEST.exr REFERENCE.exr [B]`
 
@@ -38,6 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         channel_mean(&reference, 0..w, 0..h),
     );
     let (mut sum, mut worst, mut n) = (0.0f64, 0.0f64, 0);
+    let mut errors = Vec::new();
     for by in 0..h / b {
         for bx in 0..w / b {
             let (xs, ys) = (bx * b..(bx + 1) * b, by * b..(by + 1) * b);
@@ -46,6 +48,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let e = (t - r).abs() / r.max(1e-3);
             sum += e;
             worst = worst.max(e);
+            errors.push((e, bx, by));
             n += 1;
         }
     }
@@ -55,5 +58,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         100.0 * sum / n as f64,
         100.0 * worst
     );
+    errors.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let top: Vec<String> = errors
+        .iter()
+        .take(5)
+        .map(|(e, x, y)| format!("({x},{y}) {:.1}%", 100.0 * e))
+        .collect();
+    println!("largest blocks (column, row): {}", top.join(", "));
     Ok(())
 }
