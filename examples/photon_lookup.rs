@@ -137,7 +137,10 @@ fn main() {
     let t = Instant::now();
     let mut found_b = 0u64;
     for &q in &queries[..200] {
-        found_b += points.iter().filter(|p| p.distance_squared(q) <= r2).count() as u64;
+        found_b += points
+            .iter()
+            .filter(|p| p.distance_squared(q) <= r2)
+            .count() as u64;
     }
     println!(
         "brute force: query {:.1} us ({:.1} found per query)",
