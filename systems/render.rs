@@ -119,7 +119,10 @@ fn render_photon(world: &mut World, scene: &RenderScene, camera: &Camera, config
             frame.render_seconds = start.elapsed().as_secs_f64();
             frame.film = Some(film);
             frame.counters = counters;
-            frame.samples = config.settings.spp * config.settings.photon.iterations;
+            frame.samples = config
+                .settings
+                .spp
+                .saturating_mul(config.settings.photon.iterations);
             frame.photon = Some(report);
         }
         Err(e) => frame.error = Some(e),

@@ -356,6 +356,12 @@ impl RenderSettings {
         self.gooch.validate()?;
         if self.transport == Transport::Photon {
             self.photon.validate()?;
+            if self.spp as u64 * self.photon.iterations as u64 > MAX_SPP as u64 {
+                return Err(format!(
+                    "photon iterations times samples per pixel ({} x {}) exceeds the maximum of {MAX_SPP} samples per pixel",
+                    self.photon.iterations, self.spp
+                ));
+            }
         }
         if let Some(l) = &self.lines {
             l.validate()?;

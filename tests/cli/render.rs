@@ -507,6 +507,10 @@ fn photon_options_reject_bad_input_cleanly() {
         (&["--photon-radius", "-1"], &["radius"]),
         (&["--photon-alpha", "1"], &["alpha"]),
         (&["--photon-iterations", "0"], &["iterations"]),
+        (
+            &["--photon-iterations", "1048576", "--spp", "2"],
+            &["iterations times samples"],
+        ),
         (&["--integrator", "wavefront"], &["recursive"]),
     ];
     for (extra, words) in cases {

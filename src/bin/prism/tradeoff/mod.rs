@@ -76,7 +76,8 @@ pub struct TradeoffArgs {
     /// reference's samples are independent of the sweep's].
     #[arg(long)]
     pub reference_seed: Option<u64>,
-    /// Knobs to sweep, comma-separated [default: all].
+    /// Knobs to sweep, comma-separated [default: all but
+    /// photon-iterations, whose renders are long].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub knobs: Vec<Knob>,
     /// `--width`, `--height`, `--spp`, `--max-depth`.
@@ -440,7 +441,10 @@ pub fn run(args: TradeoffArgs) -> Result<()> {
 fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     let integrator = args.integrator.kind();
     let knobs: Vec<Knob> = if args.knobs.is_empty() {
-        Knob::ALL.to_vec()
+        Knob::ALL
+            .into_iter()
+            .filter(|&k| k != Knob::PhotonIterations)
+            .collect()
     } else {
         let mut k: Vec<Knob> = Vec::new();
         for &x in &args.knobs {
