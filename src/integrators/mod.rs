@@ -4,6 +4,7 @@
 pub mod counters;
 pub mod lines;
 pub mod overlay;
+pub mod photon;
 pub mod progressive;
 pub mod recursive;
 pub mod vector_lines;

@@ -126,7 +126,11 @@ pub fn pixel_sample(
     counters.rays.camera += 1;
     match settings.transport {
         Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
-        Transport::Path => trace_path(scene, settings, &ray, &mut sampler, counters),
+        // A lone sample has no photon maps: photon transport renders through
+        // `integrators::photon`; here it falls back to path tracing.
+        Transport::Path | Transport::Photon => {
+            trace_path(scene, settings, &ray, &mut sampler, counters)
+        }
     }
 }
 

@@ -81,6 +81,8 @@ pub struct SettingsDesc {
     pub lines: Option<crate::core::settings::LineSettings>,
     /// Random numbers.
     pub sampler: Option<crate::core::rng::SamplerKind>,
+    /// Photon mapping's parameters, each optional.
+    pub photon: crate::core::photon_settings::PhotonOverrides,
 }
 
 impl SettingsDesc {
@@ -112,6 +114,7 @@ impl SettingsDesc {
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
             lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
+            photon: self.photon.or(under.photon).resolve(),
         }
     }
 }

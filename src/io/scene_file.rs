@@ -80,6 +80,18 @@ struct FileSettings {
     lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
+    /// Photon mapping (each optional).
+    photon: Option<FilePhoton>,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FilePhoton {
+    photons: Option<u32>,
+    radius: Option<f32>,
+    alpha: Option<f32>,
+    iterations: Option<u32>,
+    gather_rays: Option<u32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -118,6 +130,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Photon,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -531,7 +544,20 @@ impl Ctx<'_> {
             l.validate()
                 .map_err(|e| self.err(format!("settings.lines: {e}")))?;
         }
+        let photon = s.photon.unwrap_or_default();
+        let photon = crate::core::photon_settings::PhotonOverrides {
+            photons: photon.photons,
+            radius: photon.radius,
+            alpha: photon.alpha,
+            iterations: photon.iterations,
+            gather_rays: photon.gather_rays,
+        };
+        photon
+            .resolve()
+            .validate()
+            .map_err(|e| self.err(format!("settings.photon: {e}")))?;
         Ok(SettingsDesc {
+            photon,
             width: s.width,
             height: s.height,
             spp: s.spp,
@@ -542,6 +568,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
             rr_start_depth: s.russian_roulette.map(|r| match r {

@@ -715,4 +715,56 @@ fn the_sample_environment_map_renders() {
     let img = image::open(&out_file).unwrap().to_rgb32f();
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
     assert!(img.pixels().any(|p| p.0[1] > 0.1));
+/// Photon transport's options reject bad values with a clear message, and
+/// the wavefront integrator says it does not run photon transport.
+#[test]
+fn photon_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("caustic.toml");
+    let out = dir.path().join("c.png");
+    let small = ["--width", "8", "--height", "6"];
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--photons", "0"], &["photons per iteration"]),
+        (&["--photon-radius", "0"], &["radius"]),
+        (&["--photon-radius", "nan"], &["radius", "NaN"]),
+        (&["--photon-radius", "-1"], &["radius"]),
+        (&["--photon-alpha", "1"], &["alpha"]),
+        (&["--photon-iterations", "0"], &["iterations"]),
+        (
+            &["--photon-iterations", "1048576", "--spp", "2"],
+            &["iterations times samples"],
+        ),
+        (&["--integrator", "wavefront"], &["recursive"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = small.to_vec();
+        args.extend_from_slice(extra);
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+    }
+    // Shards need the whole image's photons per pixel row: refused.
+    let exr = dir.path().join("c.exr");
+    let mut args: Vec<&str> = small.to_vec();
+    args.extend_from_slice(&["--shard", "0/2"]);
+    assert_clean_failure(&render(&scene, &exr, &args), &exr, &["whole image"]);
+    // The same in a scene file's [settings.photon], named by its key.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[settings]\ntransport = \"photon\"\n[settings.photon]\nradius = 0.0\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
+    )
+    .unwrap();
+    assert_clean_failure(
+        &render(&bad, &out, &[]),
+        &out,
+        &["settings.photon", "radius"],
+    );
+    // A scene with nothing to emit photons.
+    let dark = dir.path().join("dark.toml");
+    std::fs::write(
+        &dark,
+        "[settings]\ntransport = \"photon\"\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
+    )
+    .unwrap();
+    assert_clean_failure(&render(&dark, &out, &[]), &out, &["needs a light"]);
 }

@@ -9,6 +9,8 @@
 //!   through the `prism` binary, mirror, lens, shadows, determinism);
 //! * `cargo test --test render path::` — path transport against analytic
 //!   answers (white furnace, area lights) and the Whitted tracer;
+//! * `cargo test --test render photon::` — photon transport against the
+//!   path tracer (Cornell box) and bit for bit across thread counts;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -34,6 +36,7 @@ mod large_worlds;
 mod overlay;
 mod models;
 mod path;
+mod photon;
 mod robustness;
 mod scene_updates;
 mod shards;

@@ -20,8 +20,8 @@ use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
 use crate::args::StyleArg;
 use crate::args::{
-    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
-    SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
+    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, PhotonFlags,
+    QualityArg, SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
 use crate::shard::{self, PixelBounds, ShardSpec};
 use crate::stats::{RenderStats, WavefrontStatsJson};
@@ -205,6 +205,10 @@ pub struct RenderArgs {
     /// `--light-samples`, `--rr-depth`.
     #[command(flatten)]
     path: PathFlags,
+    /// `--photons`, `--photon-radius`, `--photon-alpha`,
+    /// `--photon-iterations`, `--final-gather`.
+    #[command(flatten)]
+    photon: PhotonFlags,
     /// Path tracing: never end paths by Russian roulette (unbiased either
     /// way; roulette trades variance for speed).
     #[arg(long, conflicts_with = "rr_depth")]
@@ -579,6 +583,7 @@ fn render_with_pool(
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
         sampler: args.path.sampler(),
+        photon: args.photon.overrides(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
@@ -628,11 +633,21 @@ fn render_with_pool(
 
     // The line stage reports its rows on the same bar.
     let passes = 1 + settings.lines.is_some() as u64;
-    let bar = progress_bar(
-        settings.window().row_count() as u64 * passes,
-        args.quiet,
-        "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
-    );
+    let bar = if settings.transport == prism::core::settings::Transport::Photon {
+        // Each iteration's photon pass and camera pass report a share each.
+        progress_bar(
+            prism::integrators::photon::progress_steps(&settings)
+                + settings.lines.is_some() as u64 * settings.height as u64,
+            args.quiet,
+            "{spinner} photon mapping [{bar:40}] {percent}% {elapsed_precise} (eta {eta})",
+        )
+    } else {
+        progress_bar(
+            settings.window().row_count() as u64 * passes,
+            args.quiet,
+            "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
+        )
+    };
     let progress: Option<systems::ProgressFn> = bar.clone().map(|b| {
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
@@ -771,6 +786,7 @@ fn render_with_pool(
         nonfinite_samples: frame.counters.nonfinite_samples,
         line_seconds: frame.lines.as_ref().map(|_| frame.line_seconds),
         line_rays: frame.lines.as_ref().map(|_| frame.line_rays),
+        photon: frame.photon,
         wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,
