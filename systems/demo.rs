@@ -306,6 +306,7 @@ impl DemoScene {
                 up: Vec3::Y,
                 vfov_degrees: 45.0,
                 name: None,
+                ..Default::default()
             })
             .id()
     }

@@ -18,6 +18,7 @@ use crate::integrators::progressive::Accumulator;
 use crate::integrators::wavefront::WavefrontReport;
 use crate::scene::RenderScene;
 use crate::scene::camera::Camera;
+use crate::scene::environment::Environment;
 
 /// Called with the number of image rows finished.
 pub type ProgressFn = Arc<dyn Fn(u64) + Send + Sync>;
@@ -36,6 +37,9 @@ pub struct RenderConfig {
     pub bvh_quality: BuildQuality,
     /// Radiance of escaped rays.
     pub background: Color,
+    /// Light from infinitely far away; escaped rays bring back its
+    /// radiance instead of `background` when present.
+    pub environment: Option<Environment>,
     /// Optional progress callback.
     pub progress: Option<ProgressFn>,
 }
@@ -48,6 +52,7 @@ impl Default for RenderConfig {
             camera: None,
             bvh_quality: BuildQuality::default(),
             background: Color::ZERO,
+            environment: None,
             progress: None,
         }
     }
@@ -88,7 +93,7 @@ pub struct ProgressiveRendering {
 #[derive(Resource, Default)]
 pub struct AccumulationState {
     pub(super) accumulator: Accumulator,
-    pub(super) key: Option<(RenderSettings, Camera, Color)>,
+    pub(super) key: Option<(RenderSettings, Camera, Color, Option<Environment>)>,
 }
 
 /// The finished frame.
@@ -122,6 +127,8 @@ pub struct Frame {
     pub line_rays: u64,
     /// Seconds spent finding lines.
     pub line_seconds: f64,
+    /// What the photon passes did, for photon-mapped frames.
+    pub photon: Option<crate::integrators::photon::PhotonReport>,
 }
 
 /// Where the render origin (floating origin) goes. Entities keep their

@@ -54,8 +54,7 @@ pub fn render_radiosity(world: &mut World) {
     let update = world.resource::<Frame>().update;
     // Rebasing (the origin following the camera) is not a scene change.
     let scene_changed = update.reset
-        || update.removed + update.added + update.moved + update.regeometry + update.rematerial
-            > 0
+        || update.removed + update.added + update.moved + update.regeometry + update.rematerial > 0
         || update.lights_changed;
     world.init_resource::<RadiosityState>();
     let solve_start = Instant::now();

@@ -46,7 +46,7 @@ impl Renderer {
     }
 
     /// Spawns `desc` into a new world and configures it with `config`,
-    /// the scene's background and its camera number `camera` (file order).
+    /// the scene's background and environment and its camera number `camera` (file order).
     pub fn with_scene(
         desc: SceneDesc,
         mut config: RenderConfig,
@@ -54,6 +54,7 @@ impl Renderer {
     ) -> crate::Result<Self> {
         let mut r = Self::new();
         config.background = desc.background;
+        config.environment = desc.environment.clone();
         r.cameras = spawn_scene(&mut r.world, desc);
         config.camera = Some(*r.cameras.get(camera).ok_or_else(|| {
             crate::Error::Invalid(format!(

@@ -144,9 +144,9 @@ fn remove_object(scene: &mut RenderScene, sync: &mut SceneSync, e: Entity) {
 pub fn prepare_sync(world: &mut World) {
     let start = Instant::now();
     world.remove_resource::<super::wavefront::WavefrontFrame>();
-    let (background, quality) = {
+    let (background, environment, quality) = {
         let c = world.resource::<RenderConfig>();
-        (c.background, c.bvh_quality)
+        (c.background, c.environment.clone(), c.bvh_quality)
     };
     let same_quality = world.resource::<SceneSync>().quality == Some(quality);
     let mut accel = world.resource_mut::<SceneAccel>();
@@ -156,17 +156,17 @@ pub fn prepare_sync(world: &mut World) {
             .as_mut()
             .is_some_and(|s| Arc::get_mut(s).is_some());
     if !usable {
-        accel.scene = Some(Arc::new(RenderScene::new(
-            Vec::new(),
-            Vec::new(),
-            Vec::new(),
-            background,
-            quality,
-        )));
-    } else if let Some(s) = accel.scene.as_mut().and_then(Arc::get_mut)
-        && s.background() != background
-    {
-        s.set_background(background);
+        accel.scene = Some(Arc::new(
+            RenderScene::new(Vec::new(), Vec::new(), Vec::new(), background, quality)
+                .with_environment(environment),
+        ));
+    } else if let Some(s) = accel.scene.as_mut().and_then(Arc::get_mut) {
+        if s.background() != background {
+            s.set_background(background);
+        }
+        if s.environment() != environment.as_ref() {
+            s.set_environment(environment);
+        }
     }
     let rebased = choose_origin(world, !usable);
     let mut sync = world.resource_mut::<SceneSync>();

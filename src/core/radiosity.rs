@@ -5,7 +5,9 @@
 use serde::Serialize;
 
 /// How form factors are estimated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Estimator {
     /// Analytic point-to-polygon form factors at points of the sending
@@ -244,9 +246,15 @@ impl RadiosityDesc {
                 .refine_threshold
                 .or(under.refine_threshold)
                 .unwrap_or(d.refine_threshold),
-            max_patches: self.max_patches.or(under.max_patches).unwrap_or(d.max_patches),
+            max_patches: self
+                .max_patches
+                .or(under.max_patches)
+                .unwrap_or(d.max_patches),
             view: self.view.or(under.view).unwrap_or(d.view),
-            gather_rays: self.gather_rays.or(under.gather_rays).unwrap_or(d.gather_rays),
+            gather_rays: self
+                .gather_rays
+                .or(under.gather_rays)
+                .unwrap_or(d.gather_rays),
         }
     }
 }

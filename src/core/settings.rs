@@ -50,6 +50,8 @@ pub struct RenderSettings {
     pub sampler: crate::core::rng::SamplerKind,
     /// Radiosity's options (used by [`Transport::Radiosity`] only).
     pub radiosity: crate::core::radiosity::RadiositySettings,
+    /// Photon mapping's parameters (used by [`Transport::Photon`] only).
+    pub photon: crate::core::photon_settings::PhotonSettings,
 }
 
 /// How surfaces with a diffuse or glossy lobe are shaded.
@@ -197,6 +199,10 @@ pub enum Transport {
     /// Radiosity: diffuse interreflection between patches, solved once
     /// per scene and looked up by view rays (see [`crate::radiosity`]).
     Radiosity,
+    /// Progressive photon mapping: photons traced from the lights into a
+    /// caustic and a global map each iteration, read by the camera side
+    /// at diffuse and glossy surfaces (see [`crate::transport::photon`]).
+    Photon,
 }
 
 impl Transport {
@@ -206,6 +212,7 @@ impl Transport {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
             Transport::Radiosity => "radiosity",
+            Transport::Photon => "photon",
         }
     }
 }
@@ -270,6 +277,7 @@ impl Default for RenderSettings {
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
             radiosity: Default::default(),
+            photon: Default::default(),
         }
     }
 }
@@ -357,6 +365,15 @@ impl RenderSettings {
             self.radiosity.validate()?;
             if self.window.is_some() {
                 return Err("radiosity renders whole images: it takes no render window".into());
+            }
+        }
+        if self.transport == Transport::Photon {
+            self.photon.validate()?;
+            if self.spp as u64 * self.photon.iterations as u64 > MAX_SPP as u64 {
+                return Err(format!(
+                    "photon iterations times samples per pixel ({} x {}) exceeds the maximum of {MAX_SPP} samples per pixel",
+                    self.photon.iterations, self.spp
+                ));
             }
         }
         if let Some(l) = &self.lines {

@@ -90,7 +90,16 @@ pub fn trace(
                 RayKind::Camera => counters.rays.camera += 1,
             }
             radiance += s.weight
-                * trace(scene, sol, settings, &s.ray, depth + 1, t, sampler, counters);
+                * trace(
+                    scene,
+                    sol,
+                    settings,
+                    &s.ray,
+                    depth + 1,
+                    t,
+                    sampler,
+                    counters,
+                );
         }
     }
     radiance

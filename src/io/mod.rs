@@ -4,6 +4,7 @@
 //! [`gltf::load_gltf`], `.toml` to [`scene_file::load_scene_file`].
 
 pub mod desc;
+pub mod environment;
 pub mod gltf;
 pub mod scene_file;
 

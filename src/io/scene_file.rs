@@ -21,6 +21,7 @@ use crate::geometry::transform::Transform;
 use crate::image::output::srgb_to_linear;
 use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc, SettingsDesc};
 use crate::scene::camera::Camera;
+use crate::scene::environment::{Environment, EnvironmentSource};
 use crate::scene::light::Light;
 use crate::scene::material::{ImageTexture, Material, Texture, UvTransform};
 
@@ -38,6 +39,20 @@ struct FileScene {
     lights: Vec<FileLight>,
     #[serde(default)]
     gltf: Vec<FileInclude>,
+    environment: Option<FileEnvironment>,
+}
+
+/// `[environment]`: an equirectangular map (`path`) or a uniform `color`,
+/// scaled by `intensity` and turned by `rotation` degrees about +Y.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileEnvironment {
+    path: Option<PathBuf>,
+    color: Option<FileColor>,
+    #[serde(default = "one")]
+    intensity: f32,
+    #[serde(default)]
+    rotation: f32,
 }
 
 #[derive(Deserialize, Default)]
@@ -67,6 +82,18 @@ struct FileSettings {
     sampler: Option<FileSampler>,
     /// Radiosity's options (`[settings.radiosity]`).
     radiosity: Option<crate::core::radiosity::RadiosityDesc>,
+    /// Photon mapping (each optional).
+    photon: Option<FilePhoton>,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FilePhoton {
+    photons: Option<u32>,
+    radius: Option<f32>,
+    alpha: Option<f32>,
+    iterations: Option<u32>,
+    gather_rays: Option<u32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -106,6 +133,7 @@ enum FileTransport {
     Whitted,
     Path,
     Radiosity,
+    Photon,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -124,6 +152,14 @@ struct FileCamera {
     up: [f32; 3],
     #[serde(default = "default_vfov")]
     vfov: f32,
+    /// Thin lens: aperture radius in scene units (0: pinhole).
+    aperture_radius: Option<f32>,
+    /// Thin lens: f-number (see `Camera::set_f_number`).
+    f_number: Option<f32>,
+    /// Thin lens: distance of the plane in focus (default: to `look_at`).
+    focus_distance: Option<f32>,
+    /// Orthographic projection: half the height of the view, in scene units.
+    ortho_half_height: Option<f32>,
 }
 
 fn default_up() -> [f32; 3] {
@@ -412,6 +448,9 @@ impl Ctx<'_> {
             scene.background =
                 non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
         }
+        if let Some(env) = &file.environment {
+            scene.environment = Some(self.environment(env)?);
+        }
         if let Some(c) = &file.camera {
             scene.cameras.push(self.camera(c).map_err(|m| self.err(m))?);
         }
@@ -508,7 +547,20 @@ impl Ctx<'_> {
             l.validate()
                 .map_err(|e| self.err(format!("settings.lines: {e}")))?;
         }
+        let photon = s.photon.unwrap_or_default();
+        let photon = crate::core::photon_settings::PhotonOverrides {
+            photons: photon.photons,
+            radius: photon.radius,
+            alpha: photon.alpha,
+            iterations: photon.iterations,
+            gather_rays: photon.gather_rays,
+        };
+        photon
+            .resolve()
+            .validate()
+            .map_err(|e| self.err(format!("settings.photon: {e}")))?;
         Ok(SettingsDesc {
+            photon,
             width: s.width,
             height: s.height,
             spp: s.spp,
@@ -520,6 +572,7 @@ impl Ctx<'_> {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
                 FileTransport::Radiosity => crate::core::settings::Transport::Radiosity,
+                FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
             rr_start_depth: s.russian_roulette.map(|r| match r {
@@ -549,7 +602,26 @@ impl Ctx<'_> {
             up: finite3("camera.up", c.up)?,
             vfov_degrees: c.vfov,
             name: None,
+            focus_distance: c.focus_distance.unwrap_or(0.0),
+            ..Default::default()
         };
+        let mut cam = cam;
+        match (c.aperture_radius, c.f_number) {
+            (Some(_), Some(_)) => {
+                return Err("camera: give aperture_radius or f_number, not both".into());
+            }
+            (Some(r), None) => cam.lens_radius = r,
+            (None, Some(n)) => {
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(format!("camera.f_number must be positive, got {n}"));
+                }
+                cam.set_f_number(n);
+            }
+            (None, None) => {}
+        }
+        if let Some(h) = c.ortho_half_height {
+            cam.projection = crate::scene::camera::Projection::Orthographic { half_height: h };
+        }
         cam.validate()?;
         Ok(cam)
     }
@@ -582,15 +654,45 @@ impl Ctx<'_> {
                     .map(|p| Color::new(p[0], p[1], p[2]).map(srgb_to_linear))
                     .collect();
                 Ok(Texture::Image {
-                    image: Arc::new(ImageTexture {
-                        width,
-                        height,
-                        texels,
-                    }),
+                    image: Arc::new(ImageTexture::new(width, height, texels)),
                     transform: UvTransform::default(),
+                    sampler: Default::default(),
                 })
             }
         }
+    }
+
+    fn environment(&self, e: &FileEnvironment) -> Result<Environment> {
+        if !(e.intensity.is_finite() && e.intensity >= 0.0) {
+            return Err(self.err(format!(
+                "environment.intensity must be finite and non-negative, got {}",
+                e.intensity
+            )));
+        }
+        if !e.rotation.is_finite() {
+            return Err(self.err(format!(
+                "environment.rotation must be finite, got {}",
+                e.rotation
+            )));
+        }
+        let source = match (&e.path, e.color) {
+            (Some(path), None) => EnvironmentSource::Map(
+                crate::io::environment::load_environment_map(&self.base.join(path))?,
+            ),
+            (None, Some(c)) => EnvironmentSource::Uniform(
+                non_negative("environment.color", c.get()).map_err(|m| self.err(m))?,
+            ),
+            _ => {
+                return Err(self.err(
+                    "[environment] needs exactly one of `path` (an .hdr or .exr map) and `color`",
+                ));
+            }
+        };
+        Ok(Environment::new(
+            source,
+            e.intensity,
+            e.rotation.to_radians(),
+        ))
     }
 
     fn material(&self, m: &FileMaterial) -> std::result::Result<Material, String> {

@@ -51,7 +51,6 @@ use crate::geometry::mesh::Mesh;
 
 pub use crate::core::radiosity::Estimator;
 
-
 /// The form factor matrix, rows in compressed sparse form.
 #[derive(Clone, Debug, Default)]
 pub struct FormFactors {
@@ -242,7 +241,14 @@ pub const QUADRATURE_TOLERANCE: f32 = 2e-6;
 /// Point form factor from `x` (normal `ni`) to triangle `cj` (normal
 /// `nj`, centroid `oj`): zero unless `j` faces `x`.
 #[inline]
-fn point_term(x: Vec3A, ni: Vec3A, cj: &[Vec3A; 3], nj: Vec3A, oj: Vec3A, scratch: &mut Vec<Vec3A>) -> f32 {
+fn point_term(
+    x: Vec3A,
+    ni: Vec3A,
+    cj: &[Vec3A; 3],
+    nj: Vec3A,
+    oj: Vec3A,
+    scratch: &mut Vec<Vec3A>,
+) -> f32 {
     if nj.dot(x - oj) <= 0.0 {
         return 0.0;
     }
@@ -375,8 +381,26 @@ fn ray_cast_row(
             continue;
         }
         let near = (centroid(&cj) - oi).length() < NEAR_DISTANCE * (si + size(&cj));
-        let uij = unoccluded_term(ni, &cj, nj, &pieces[i], &points[i], near, &mut fi, &mut scratch);
-        let uji = unoccluded_term(nj, &ci, ni, &pieces[j], &points[j], near, &mut fj, &mut scratch);
+        let uij = unoccluded_term(
+            ni,
+            &cj,
+            nj,
+            &pieces[i],
+            &points[i],
+            near,
+            &mut fi,
+            &mut scratch,
+        );
+        let uji = unoccluded_term(
+            nj,
+            &ci,
+            ni,
+            &pieces[j],
+            &points[j],
+            near,
+            &mut fj,
+            &mut scratch,
+        );
         // The same sum whichever row computes it.
         let g = 0.5 * (patches.area[i] * uij + patches.area[j] * uji);
         if !(g > 0.0) {
@@ -395,7 +419,13 @@ fn ray_cast_row(
 /// triangle hit (the occluder mesh is built from the base triangles in
 /// order), the side facing the ray, and the patch there.
 #[inline]
-pub fn patch_hit(patches: &Patches, occluders: &Mesh, ray: &Ray, t_min: f32, t_max: f32) -> Option<(u32, f32, f32, f32)> {
+pub fn patch_hit(
+    patches: &Patches,
+    occluders: &Mesh,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+) -> Option<(u32, f32, f32, f32)> {
     let h = occluders.intersect(ray, t_min, t_max)?;
     let base = occluders.input_triangle(h.triangle as usize);
     let n = patches.bases[base as usize].normal;

@@ -53,8 +53,6 @@ use crate::geometry::shapes::Shape;
 use crate::scene::RenderScene;
 use crate::scene::instance::InstanceGeometry;
 
-
-
 /// The form factor method `settings` choose.
 pub fn method(settings: &RadiositySettings) -> FormFactorMethod {
     match settings.estimator {
@@ -168,7 +166,10 @@ pub fn base_triangles(
                 surfaces: [None, None],
             });
             group.push(g);
-            shading.push((s.diffuse.max(Vec3::ZERO), s.emission.max(Vec3::ZERO) * std::f32::consts::PI));
+            shading.push((
+                s.diffuse.max(Vec3::ZERO),
+                s.emission.max(Vec3::ZERO) * std::f32::consts::PI,
+            ));
             Ok(())
         };
         match &inst.geometry {
@@ -224,7 +225,12 @@ pub fn base_mesh(bases: &[patches::BaseTriangle]) -> Result<Mesh, String> {
             .collect(),
         ..Default::default()
     };
-    Mesh::new("radiosity patches", data, NormalMode::Flat, BuildQuality::Medium)
+    Mesh::new(
+        "radiosity patches",
+        data,
+        NormalMode::Flat,
+        BuildQuality::Medium,
+    )
 }
 
 /// Solves the radiosity of `scene`: patches, form factors, solve, and
@@ -268,7 +274,9 @@ pub fn solve_triangles(
         .patch_size
         .unwrap_or_else(|| (hi - lo).max_element() / 8.0);
     if !(patch_size.is_finite() && patch_size > 0.0) {
-        return Err(format!("radiosity patch size must be positive, got {patch_size}"));
+        return Err(format!(
+            "radiosity patch size must be positive, got {patch_size}"
+        ));
     }
     let mesh = base_mesh(&bases)?;
     let max_patches = settings.max_patches as usize;

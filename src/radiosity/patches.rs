@@ -415,7 +415,9 @@ mod tests {
                 let (u, v) = (i as f32 / 20.0, j as f32 / 20.0);
                 let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
                 let (k, cu, cv) = child_coordinates(u, v);
-                assert!((0.0..=1.0).contains(&cu) && (0.0..=1.0).contains(&cv) && cu + cv <= 1.0 + 1e-6);
+                assert!(
+                    (0.0..=1.0).contains(&cu) && (0.0..=1.0).contains(&cv) && cu + cv <= 1.0 + 1e-6
+                );
                 let c = kids[k];
                 let q = c[0] + (c[1] - c[0]) * cu + (c[2] - c[0]) * cv;
                 assert!((p - q).length() < 1e-5, "{u} {v}: {p} vs {q}");

@@ -23,7 +23,6 @@ pub use crate::core::radiosity::Solver;
 use super::form_factor::FormFactors;
 use crate::core::math::{Color, max_component};
 
-
 /// What a solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct SolveReport {

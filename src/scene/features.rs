@@ -34,6 +34,9 @@ pub struct SceneFeatures {
     pub mesh_instances: usize,
     /// Whether any material reads a texture.
     pub textures: bool,
+    /// Whether the scene has an environment (escaped rays look it up;
+    /// path transport samples it as a light).
+    pub environment: bool,
 }
 
 /// What a material class does: the one table that stage gating, the
@@ -135,6 +138,7 @@ impl SceneFeatures {
             }
         }
         f.area_light_primitives = scene.emitters.len();
+        f.environment = scene.environment.is_some();
         f.shapes = shapes.into_iter().collect();
         f
     }
@@ -146,13 +150,14 @@ impl SceneFeatures {
 
     /// True when shading can push shadow rays under `transport`: some
     /// material evaluates lights and some light exists (area lights count
-    /// only for path transport).
+    /// and the environment only for path transport).
     pub fn needs_shadow_rays(&self, transport: Transport) -> bool {
         let lit = MaterialClass::ALL
             .into_iter()
             .any(|c| c.is_lit() && self.has(c));
         let punctual = self.point_lights + self.spot_lights + self.directional_lights > 0;
-        let area = transport == Transport::Path && self.area_light_primitives > 0;
+        let area =
+            transport == Transport::Path && (self.area_light_primitives > 0 || self.environment);
         lit && (punctual || area)
     }
 }

@@ -4,6 +4,7 @@
 
 pub mod camera;
 pub mod emitters;
+pub mod environment;
 pub mod features;
 pub mod instance;
 pub mod light;

@@ -7,6 +7,7 @@ use crate::accel::build::BuildQuality;
 use crate::accel::tlas::Tlas;
 use crate::core::math::Color;
 use crate::scene::emitters::EmitterTable;
+use crate::scene::environment::Environment;
 use crate::scene::instance::{Instance, InstanceGeometry};
 use glam::DVec3;
 
@@ -32,6 +33,10 @@ pub struct RenderScene {
     pub(super) lights: Vec<WorldLight>,
     /// Radiance of escaped rays.
     pub(super) background: Color,
+    /// Light from infinitely far away: when present, escaped rays bring
+    /// back its radiance instead of `background`, and path transport
+    /// samples it as a light.
+    pub(super) environment: Option<Environment>,
     /// Emissive surfaces as area lights, for path tracing (rebuilt by
     /// [`RenderScene::commit`] when instances or materials change).
     pub(super) emitters: EmitterTable,
@@ -45,6 +50,10 @@ pub struct RenderScene {
     /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
     /// or by the last [`RenderScene::commit`] that changed it).
     pub(super) tlas_build_seconds: f64,
+    /// True when some material has an alpha mode
+    /// ([`Material::alpha`]): only then do intersection queries look at
+    /// materials ([`has_cutouts`]; kept up to date by the material updates).
+    pub(super) cutouts: bool,
 }
 
 impl RenderScene {
@@ -85,12 +94,14 @@ impl RenderScene {
         let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
+            cutouts: has_cutouts(&materials),
             instances,
             materials,
             origin,
             light_sources,
             lights,
             background,
+            environment: None,
             emitters,
             emitters_stale: false,
             tlas,
@@ -138,6 +149,46 @@ impl RenderScene {
         self.background
     }
 
+    /// The environment, if the scene has one.
+    #[inline]
+    pub fn environment(&self) -> Option<&Environment> {
+        self.environment.as_ref()
+    }
+
+    /// Probability with which a next-event light sample of path transport
+    /// picks the environment rather than the area lights: 0 without an
+    /// environment, 1 without area lights, else one half.
+    #[inline]
+    pub fn environment_selection(&self) -> f32 {
+        match (&self.environment, self.emitters.is_empty()) {
+            (None, _) => 0.0,
+            (Some(_), true) => 1.0,
+            (Some(_), false) => 0.5,
+        }
+    }
+
+    /// Radiance of a ray that leaves the scene in direction `d`, without
+    /// multiple importance sampling (Whitted transport): the
+    /// environment's, else the background.
+    #[inline]
+    pub fn escaped_radiance(&self, d: glam::Vec3A) -> Color {
+        match &self.environment {
+            Some(env) => env.radiance(d),
+            None => self.background,
+        }
+    }
+
+    /// Sets or removes the environment.
+    pub fn set_environment(&mut self, environment: Option<Environment>) {
+        self.environment = environment;
+    }
+
+    /// This scene with `environment` set (see [`RenderScene::set_environment`]).
+    pub fn with_environment(mut self, environment: Option<Environment>) -> Self {
+        self.environment = environment;
+        self
+    }
+
     /// Emissive surfaces as area lights, for path tracing.
     pub fn emitters(&self) -> &EmitterTable {
         &self.emitters
@@ -151,6 +202,12 @@ impl RenderScene {
 }
 
 /// Lights placed in the world, resolved in the frame centred on `origin`.
+/// True when any of `materials` has an alpha mode (cut-outs or
+/// transparency), which intersection queries must then honour.
+pub(super) fn has_cutouts(materials: &[Material]) -> bool {
+    materials.iter().any(|m| m.alpha.is_some())
+}
+
 pub(super) fn resolve_lights(sources: &[(Light, Transform)], origin: DVec3) -> Vec<WorldLight> {
     sources
         .iter()

@@ -28,8 +28,9 @@ use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::RenderSettings;
 use crate::scene::RenderScene;
+use crate::scene::environment::Environment;
 use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
-use crate::transport::whitted::direct_light;
+use crate::transport::whitted::{direct_light, direct_light_with};
 
 /// Probabilities of choosing each lobe of a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,16 +48,24 @@ pub struct LobeChoice {
 impl LobeChoice {
     /// Proportional to each lobe's weight (luminance of its colour);
     /// all zero when the surface scatters nothing.
+    #[inline]
     pub fn new(it: &Interaction) -> Self {
         let s = &it.surface;
-        let w = [
-            luminance(s.diffuse).max(0.0),
-            luminance(s.specular).max(0.0),
-            luminance(s.mirror).max(0.0),
-            // The dielectric's reflection is untinted: weigh it by its
-            // transmission alone, so a dark tint still reflects.
-            s.transmission.max(0.0),
-        ];
+        let w = if let Some(g) = &s.gltf {
+            // The glTF BRDF: its Lambertian base and its specular layers
+            // (drawn by visible normals), and the smooth glass lobe.
+            let (diffuse, specular) = g.lobe_weights(it.ns.dot(it.wo));
+            [diffuse, specular, 0.0, s.transmission.max(0.0)]
+        } else {
+            [
+                luminance(s.diffuse).max(0.0),
+                luminance(s.specular).max(0.0),
+                luminance(s.mirror).max(0.0),
+                // The dielectric's reflection is untinted: weigh it by its
+                // transmission alone, so a dark tint still reflects.
+                s.transmission.max(0.0),
+            ]
+        };
         let total: f32 = w.iter().sum();
         if !(total > 0.0 && total.is_finite()) {
             return Self {
@@ -104,9 +113,31 @@ pub fn bsdf_pdf(it: &Interaction, lobes: &LobeChoice, wi: Vec3A) -> f32 {
         p += lobes.diffuse * it.ns.dot(wi).max(0.0) / PI;
     }
     if lobes.glossy > 0.0 {
-        p += lobes.glossy * glossy_pdf(it, wi);
+        p += lobes.glossy
+            * match &it.surface.gltf {
+                Some(g) => g.specular_pdf(it.ns, it.wo, wi),
+                None => glossy_pdf(it, wi),
+            };
     }
     p
+}
+
+/// The BRDF times the cosine that path transport uses: the glTF
+/// microfacet BRDF for glTF surfaces that have one, else the Whitted
+/// model's Lambert plus Blinn-Phong ([`brdf_cos`]).
+#[inline]
+pub fn bsdf_cos(it: &Interaction, wi: Vec3A) -> Color {
+    match &it.surface.gltf {
+        Some(g) => g.eval_cos(it.ns, it.wo, wi),
+        None => brdf_cos(&it.surface, it.ns, it.wo, wi),
+    }
+}
+
+/// True when next-event estimation can reach the surface: it has a
+/// diffuse or glossy lobe.
+#[inline]
+pub fn is_lit(it: &Interaction) -> bool {
+    it.is_lit_by_lights() || it.surface.gltf.is_some()
 }
 
 /// A direction drawn from the surface's lobes.
@@ -137,6 +168,8 @@ pub fn sample_bsdf(
     if u_lobe < smooth {
         let wi = if u_lobe < lobes.diffuse {
             cosine_hemisphere(it.ns, u)
+        } else if let Some(g) = &s.gltf {
+            g.sample_specular(it.ns, it.wo, u)?
         } else {
             // Half vector around the shading normal, then reflect.
             let cos_h = u.x.powf(1.0 / (s.shininess + 1.0));
@@ -150,7 +183,7 @@ pub fn sample_bsdf(
             return None;
         }
         let pdf = bsdf_pdf(it, lobes, wi);
-        let f = brdf_cos(s, it.ns, it.wo, wi);
+        let f = bsdf_cos(it, wi);
         if !(pdf > 0.0) || f == Color::ZERO {
             return None;
         }
@@ -239,87 +272,197 @@ pub fn next_event(
     mut emit: impl FnMut(ShadowQuery),
 ) {
     let first = bounce_dimension(settings, depth);
-    if !it.is_lit_by_lights() {
+    if !is_lit(it) {
         return;
     }
     for light in scene.lights() {
-        if let Some(q) = direct_light(it, light) {
+        let q = if it.surface.gltf.is_some() {
+            direct_light_with(it, light, |wi| bsdf_cos(it, wi))
+        } else {
+            direct_light(it, light)
+        };
+        if let Some(q) = q {
             emit(q);
         }
     }
-    if scene.emitters().is_empty() {
-        return;
-    }
     let n = settings.light_samples;
-    let inv_n = 1.0 / n as f32;
-    for i in 0..n {
-        // One set of four per light sample: the point's pair first.
+    // One set of four per light sample: the point's pair first, then the
+    // light number.
+    let mut numbers = |i: u32| {
         sampler.set_dimension(first + 4 * i);
         let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
-        let u = sampler.next_f32();
-        let Some(ls) = scene
-            .emitters()
-            .sample(scene.instances(), scene.materials(), u, v)
-        else {
-            continue;
-        };
-        let to = ls.point - it.point;
-        let dist2 = to.length_squared();
-        if !(dist2 > 0.0 && dist2.is_finite()) {
-            continue;
+        (v, sampler.next_f32())
+    };
+    let Some(env) = scene.environment() else {
+        if scene.emitters().is_empty() {
+            return;
         }
-        let dist = dist2.sqrt();
-        let wi = to / dist;
-        let cos_l = ls.normal.dot(wi).abs();
-        if it.ng.dot(wi) <= 0.0 || !(cos_l > 0.0) {
-            continue;
+        for i in 0..n {
+            let (v, u) = numbers(i);
+            if let Some(q) = area_light_sample(scene, settings, it, lobes, (u, v), 1.0, depth) {
+                emit(q);
+            }
         }
-        let f = brdf_cos(&it.surface, it.ns, it.wo, wi);
-        if f == Color::ZERO {
-            continue;
-        }
-        let pdf_light = ls.pdf_area * dist2 / cos_l;
-        let w = if depth < settings.max_depth {
-            power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+        return;
+    };
+    // With an environment, the light number first picks it (with
+    // probability `p_env`) or the area lights, then is stretched back to
+    // [0, 1) for the area lights' own choice.
+    let p_env = scene.environment_selection();
+    for i in 0..n {
+        let (v, u) = numbers(i);
+        let q = if u < p_env {
+            environment_sample(settings, it, lobes, env, p_env, v, depth)
         } else {
-            1.0
+            let u = ((u - p_env) / (1.0 - p_env)).min(1.0 - f32::EPSILON / 2.0);
+            area_light_sample(scene, settings, it, lobes, (u, v), 1.0 - p_env, depth)
         };
-        let radiance = f * ls.radiance * (w * inv_n / pdf_light);
-        if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
-            continue;
+        if let Some(q) = q {
+            emit(q);
         }
-        // End the segment just short of the emitter, so that the emitter
-        // itself never counts as a blocker. The shadow ray's own hit on
-        // it is off by a few ulps of the largest of its origin, its length
-        // and the point, in the direction of the surface normal, which is
-        // that divided by the cosine along the ray: at grazing angles a
-        // fixed offset along the normal was not enough (seen: 11% of a
-        // sphere light's visible samples lost to self-shadowing, more when
-        // the light sat nearer the render origin than the receiver).
-        let origin = offset_origin_relative(it.point, it.ng);
-        let t_light = (ls.point - origin).dot(wi);
-        let scale = ls
-            .point
-            .abs()
-            .max_element()
-            .max(origin.abs().max_element())
-            .max(t_light);
-        let t_max = t_light - OFFSET_ULPS * f32::EPSILON * scale / cos_l;
-        if !(t_max > 0.0) {
-            continue;
-        }
-        emit(ShadowQuery {
-            ray: Ray::new(origin, wi),
-            t_max,
-            radiance,
-        });
     }
+}
+
+/// One next-event sample of the area lights, drawn with `u` (which light)
+/// and `v` (where on it), the area lights being chosen with probability
+/// `select` among all lights: a shadow ray to the point carrying its
+/// MIS-weighted radiance (full weight at the last vertex).
+#[inline]
+fn area_light_sample(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    (u, v): (f32, Vec2),
+    select: f32,
+    depth: u32,
+) -> Option<ShadowQuery> {
+    let n = settings.light_samples;
+    let ls = scene
+        .emitters()
+        .sample(scene.instances(), scene.materials(), u, v)?;
+    let to = ls.point - it.point;
+    let dist2 = to.length_squared();
+    if !(dist2 > 0.0 && dist2.is_finite()) {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    let wi = to / dist;
+    let cos_l = ls.normal.dot(wi).abs();
+    if it.ng.dot(wi) <= 0.0 || !(cos_l > 0.0) {
+        return None;
+    }
+    let f = if it.surface.gltf.is_some() {
+        bsdf_cos(it, wi)
+    } else {
+        brdf_cos(&it.surface, it.ns, it.wo, wi)
+    };
+    if f == Color::ZERO {
+        return None;
+    }
+    let pdf_light = ls.pdf_area * dist2 / cos_l * select;
+    let w = if depth < settings.max_depth {
+        power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+    } else {
+        1.0
+    };
+    let radiance = f * ls.radiance * (w * (1.0 / n as f32) / pdf_light);
+    if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
+        return None;
+    }
+    // End the segment just short of the emitter, so that the emitter
+    // itself never counts as a blocker. The shadow ray's own hit on
+    // it is off by a few ulps of the largest of its origin, its length
+    // and the point, in the direction of the surface normal, which is
+    // that divided by the cosine along the ray: at grazing angles a
+    // fixed offset along the normal was not enough (seen: 11% of a
+    // sphere light's visible samples lost to self-shadowing, more when
+    // the light sat nearer the render origin than the receiver).
+    let origin = offset_origin_relative(it.point, it.ng);
+    let t_light = (ls.point - origin).dot(wi);
+    let scale = ls
+        .point
+        .abs()
+        .max_element()
+        .max(origin.abs().max_element())
+        .max(t_light);
+    let t_max = t_light - OFFSET_ULPS * f32::EPSILON * scale / cos_l;
+    if !(t_max > 0.0) {
+        return None;
+    }
+    Some(ShadowQuery {
+        ray: Ray::new(origin, wi),
+        t_max,
+        radiance,
+    })
+}
+
+/// One next-event sample of the environment, drawn with `v`, chosen with
+/// probability `p_env` among the lights: a shadow ray to infinity carrying
+/// its MIS-weighted radiance (full weight at the last vertex).
+fn environment_sample(
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    env: &Environment,
+    p_env: f32,
+    v: Vec2,
+    depth: u32,
+) -> Option<ShadowQuery> {
+    let n = settings.light_samples;
+    let es = env.sample(v)?;
+    let wi = es.direction;
+    if it.ng.dot(wi) <= 0.0 {
+        return None;
+    }
+    let f = bsdf_cos(it, wi);
+    if f == Color::ZERO {
+        return None;
+    }
+    let pdf_light = es.pdf * p_env;
+    let w = if depth < settings.max_depth {
+        power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+    } else {
+        1.0
+    };
+    let radiance = f * es.radiance * (w / (n as f32 * pdf_light));
+    if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
+        return None;
+    }
+    Some(ShadowQuery {
+        ray: Ray::new(offset_origin_relative(it.point, it.ng), wi),
+        t_max: f32::INFINITY,
+        radiance,
+    })
+}
+
+/// Radiance brought back by a ray that left the scene in `direction`:
+/// the background, or the environment weighted against next-event
+/// estimation when the previous vertex drew the ray with density
+/// `prev_pdf` (zero after the camera or a specular lobe: weight 1).
+#[inline]
+pub fn escaped(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    direction: Vec3A,
+    prev_pdf: f32,
+) -> Color {
+    let Some(env) = scene.environment() else {
+        return scene.background();
+    };
+    let l = env.radiance(direction);
+    if prev_pdf <= 0.0 || l == Color::ZERO {
+        return l;
+    }
+    let pdf_light = scene.environment_selection() * env.pdf(direction.normalize());
+    l * power_heuristic(1.0, prev_pdf, settings.light_samples as f32, pdf_light)
 }
 
 /// Emission seen at a hit, weighted against next-event estimation:
 /// `prev_pdf` is the density with which the previous vertex drew this
 /// ray's direction (zero after the camera or a specular lobe: weight 1),
 /// `distance` the ray's length to the hit.
+#[inline]
 pub fn emitted(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -342,7 +485,10 @@ pub fn emitted(
     if !(cos_l > 0.0) {
         return Color::ZERO;
     }
-    let pdf_light = pdf_area * distance * distance / cos_l;
+    let mut pdf_light = pdf_area * distance * distance / cos_l;
+    if scene.environment().is_some() {
+        pdf_light *= 1.0 - scene.environment_selection();
+    }
     le * power_heuristic(1.0, prev_pdf, settings.light_samples as f32, pdf_light)
 }
 

@@ -1,6 +1,8 @@
 //! Whitted transport: direct light from punctual lights through shadow
 //! rays, and the perfectly specular reflection and refraction rays.
 
+use glam::Vec3A;
+
 use crate::core::math::{Color, Ray};
 use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
 use crate::scene::light::{LightSample, WorldLight};
@@ -10,6 +12,17 @@ use crate::transport::interaction::{Interaction, RayKind, Secondary, ShadowQuery
 /// contribute (below the horizon, outside a spot cone, zero BRDF).
 #[inline]
 pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery> {
+    direct_light_with(it, light, |wi| brdf_cos(&it.surface, it.ns, it.wo, wi))
+}
+
+/// [`direct_light`] with another BRDF: `brdf_cos(wi)` is the BRDF times
+/// the cosine for the direction `wi` towards the light.
+#[inline]
+pub fn direct_light_with(
+    it: &Interaction,
+    light: &WorldLight,
+    brdf_cos: impl Fn(Vec3A) -> Color,
+) -> Option<ShadowQuery> {
     let LightSample {
         wi,
         distance,
@@ -18,7 +31,7 @@ pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery>
     if it.ng.dot(wi) <= 0.0 {
         return None;
     }
-    let radiance = brdf_cos(&it.surface, it.ns, it.wo, wi) * irradiance;
+    let radiance = brdf_cos(wi) * irradiance;
     if !(radiance.max_element() > 0.0) {
         return None;
     }

@@ -187,6 +187,10 @@ fn help_explains_every_option() {
         "--crease-angle",
         "--lines-svg",
         "--hidden-lines",
+        "--overlay",
+        "--overlay-depth",
+        "--overlay-svg",
+        "--overlay-visible-only",
     ] {
         assert!(help.contains(opt), "--help lacks {opt}:\n{help}");
     }
@@ -490,4 +494,281 @@ intensity = 60
         "the default origin is the camera"
     );
     assert_ne!(read("near.exr"), read("far-world.exr"));
+}
+
+/// A small scene with a mesh (a torus knot) and a sphere.
+const KNOT: &str = r#"
+[settings]
+width = 64
+height = 48
+[camera]
+look_from = [0, 0.5, 4]
+look_at = [0, 0, 0]
+[[objects]]
+shape = { type = "torus_knot", radius = 1.0, tube = 0.3, segments = 48, sides = 6 }
+[[objects]]
+shape = { type = "sphere", radius = 0.4 }
+[[lights]]
+type = "point"
+position = [2, 3, 4]
+intensity = 40
+"#;
+
+#[test]
+fn overlay_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::scenes::write(dir.path(), "knot.toml", KNOT);
+    let out = dir.path().join("o.png");
+    let svg = dir.path().join("o.svg");
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--overlay", "octree"], &["octree"]),
+        (&["--overlay-depth", "3"], &["--overlay"]),
+        (
+            &["--overlay", "kdtree", "--overlay-depth", "0"],
+            &["--overlay-depth", "64"],
+        ),
+        (
+            &["--overlay", "bvh", "--overlay-depth", "65"],
+            &["--overlay-depth", "64"],
+        ),
+        (
+            &["--overlay", "kdtree", "--overlay-depth", "99999999999"],
+            &["--overlay-depth"],
+        ),
+        (
+            &["--overlay", "wireframe", "--overlay-depth", "2"],
+            &["levels"],
+        ),
+        (&["--overlay", "grid", "--overlay-depth", "2"], &["levels"]),
+        (
+            &["--overlay", "kdtree", "--accel", "grid"],
+            &["--accel grid", "kd"],
+        ),
+        (
+            &["--overlay", "bvh", "--overlay-svg", "/no/such/folder/o.svg"],
+            &["o.svg"],
+        ),
+        (&["--overlay", "bvh", "--overlay-svg", "o.txt"], &[".svg"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = extra.to_vec();
+        if !args.contains(&"--overlay-svg") && args.contains(&"--overlay") {
+            args.extend(["--overlay-svg", svg.to_str().unwrap()]);
+        }
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+        assert!(!svg.exists(), "{extra:?} left an SVG");
+    }
+    // Shards are refused too.
+    let exr = dir.path().join("o.exr");
+    let o = render(&scene, &exr, &["--overlay", "grid", "--shard", "0/2"]);
+    assert_clean_failure(&o, &exr, &["--overlay", "shards"]);
+}
+
+#[test]
+fn overlay_image_and_svg_are_written_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::scenes::write(dir.path(), "knot.toml", KNOT);
+    let plain = dir.path().join("plain.png");
+    assert_success(&render(&scene, &plain, &["--accel", "kdtree"]));
+    let out = dir.path().join("o.png");
+    let svg = dir.path().join("o.svg");
+    let o = render(
+        &scene,
+        &out,
+        &[
+            "--overlay",
+            "kdtree",
+            "--overlay-depth",
+            "3",
+            "--overlay-svg",
+            svg.to_str().unwrap(),
+        ],
+    );
+    assert_success(&o);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<?xml") && text.trim_end().ends_with("</svg>"));
+    assert!(text.contains(r#"class="plane visible""#), "{text}");
+    assert!(text.contains(r#"class="plane hidden""#), "{text}");
+    assert!(text.contains(r#"class="bounds "#), "{text}");
+    // The lines are drawn over the image, which is otherwise the render.
+    let (a, b) = (
+        image::open(&plain).unwrap().to_rgb8(),
+        image::open(&out).unwrap().to_rgb8(),
+    );
+    let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(
+        changed > 50 && changed < a.len() / 3 / 2,
+        "{changed} pixels changed"
+    );
+    // Only the scene, the two images and the SVG: no temporary file left.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
+    // Visible pieces only: no hidden line in the SVG.
+    let o = render(
+        &scene,
+        &out,
+        &[
+            "--overlay",
+            "wireframe",
+            "--overlay-visible-only",
+            "--overlay-svg",
+            svg.to_str().unwrap(),
+        ],
+    );
+    assert_success(&o);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains(r#"class="triangle visible""#) && !text.contains("triangle hidden"));
+}
+
+/// Bad environment maps and options, given with `--env` or in a scene's
+/// `[environment]`: a clear error naming the problem, no output file.
+#[test]
+fn bad_environment_maps_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out_file = d.join("a.png");
+    let hdr = |name: &str, bytes: &[u8]| {
+        let p = d.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n".to_vec();
+    let zero = hdr("zero.hdr", &[&header[..], b"-Y 0 +X 0\n"].concat());
+    let mut flat = [&header[..], b"-Y 2 +X 4\n"].concat();
+    flat.extend([128u8, 128, 128, 129].repeat(3));
+    let truncated = hdr("truncated.hdr", &flat);
+    let garbage = hdr("garbage.hdr", b"this is not an image");
+    let nan = d.join("nan.exr");
+    image::DynamicImage::ImageRgb32F(image::Rgb32FImage::from_fn(4, 2, |x, _| {
+        image::Rgb([1.0, if x == 3 { f32::NAN } else { 0.5 }, 1.0])
+    }))
+    .save(&nan)
+    .unwrap();
+    let scene = assets().join("whitted.toml");
+    for (map, words) in [
+        (
+            d.join("missing.hdr"),
+            &["missing.hdr", "environment map"][..],
+        ),
+        (zero, &["zero.hdr", "empty"][..]),
+        (truncated, &["truncated.hdr"][..]),
+        (garbage, &["garbage.hdr", "not a radiance"][..]),
+        (nan, &["nan.exr", "column 3, row 0 is nan"][..]),
+    ] {
+        let out = render(&scene, &out_file, &["--env", map.to_str().unwrap()]);
+        assert_clean_failure(&out, &out_file, words);
+        // The same map named by a scene file.
+        let toml = d.join("env.toml");
+        std::fs::write(
+            &toml,
+            format!(
+                "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\npath = {:?}\n",
+                map.file_name().unwrap().to_str().unwrap()
+            ),
+        )
+        .unwrap();
+        assert_clean_failure(&render(&toml, &out_file, &[]), &out_file, words);
+    }
+    for (extra, words) in [
+        (&["--env-intensity", "-1"][..], &["--env-intensity"][..]),
+        (&["--env-rotation", "nan"][..], &["--env-rotation"][..]),
+        (&["--env-intensity", "2"][..], &["need an environment"][..]),
+    ] {
+        assert_clean_failure(&render(&scene, &out_file, extra), &out_file, words);
+    }
+    let toml = d.join("both.toml");
+    std::fs::write(
+        &toml,
+        "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\ncolor = 1\npath = \"a.hdr\"\n",
+    )
+    .unwrap();
+    assert_clean_failure(&render(&toml, &out_file, &[]), &out_file, &["exactly one"]);
+}
+
+/// `--env` with the sample map renders a finite image (skipped when the
+/// samples are absent).
+#[test]
+fn the_sample_environment_map_renders() {
+    let map = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/samples/envmaps/spiaggia_di_mondello_1k.hdr");
+    if !map.exists() {
+        eprintln!("skipped: {} is absent", map.display());
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out_file = dir.path().join("a.exr");
+    let out = render(
+        &assets().join("whitted.toml"),
+        &out_file,
+        &[
+            "--env",
+            map.to_str().unwrap(),
+            "--env-rotation",
+            "90",
+            "--transport",
+            "path",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ],
+    );
+    assert_success(&out);
+    let img = image::open(&out_file).unwrap().to_rgb32f();
+    assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
+    assert!(img.pixels().any(|p| p.0[1] > 0.1));
+}
+
+/// Photon transport's options reject bad values with a clear message, and
+/// the wavefront integrator says it does not run photon transport.
+#[test]
+fn photon_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("caustic.toml");
+    let out = dir.path().join("c.png");
+    let small = ["--width", "8", "--height", "6"];
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--photons", "0"], &["photons per iteration"]),
+        (&["--photon-radius", "0"], &["radius"]),
+        (&["--photon-radius", "nan"], &["radius", "NaN"]),
+        (&["--photon-radius", "-1"], &["radius"]),
+        (&["--photon-alpha", "1"], &["alpha"]),
+        (&["--photon-iterations", "0"], &["iterations"]),
+        (
+            &["--photon-iterations", "1048576", "--spp", "2"],
+            &["iterations times samples"],
+        ),
+        (&["--integrator", "wavefront"], &["recursive"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = small.to_vec();
+        args.extend_from_slice(extra);
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+    }
+    // Shards need the whole image's photons per pixel row: refused.
+    let exr = dir.path().join("c.exr");
+    let mut args: Vec<&str> = small.to_vec();
+    args.extend_from_slice(&["--shard", "0/2"]);
+    assert_clean_failure(&render(&scene, &exr, &args), &exr, &["whole image"]);
+    // The same in a scene file's [settings.photon], named by its key.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[settings]\ntransport = \"photon\"\n[settings.photon]\nradius = 0.0\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
+    )
+    .unwrap();
+    assert_clean_failure(
+        &render(&bad, &out, &[]),
+        &out,
+        &["settings.photon", "radius"],
+    );
+    // A scene with nothing to emit photons.
+    let dark = dir.path().join("dark.toml");
+    std::fs::write(
+        &dark,
+        "[settings]\ntransport = \"photon\"\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
+    )
+    .unwrap();
+    assert_clean_failure(&render(&dark, &out, &[]), &out, &["needs a light"]);
 }

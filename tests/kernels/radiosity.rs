@@ -77,7 +77,12 @@ fn between(p: &Patches, ff: &FormFactors, from: u32, to: u32) -> f64 {
 /// x = 0 facing +x.
 fn two_squares(facing: bool) -> (Vec<BaseTriangle>, Vec<u32>) {
     let (mut b, mut g) = (Vec::new(), Vec::new());
-    quad(&mut b, &mut g, [v(0., 0., 0.), v(0., 0., 1.), v(1., 0., 1.), v(1., 0., 0.)], 0);
+    quad(
+        &mut b,
+        &mut g,
+        [v(0., 0., 0.), v(0., 0., 1.), v(1., 0., 1.), v(1., 0., 0.)],
+        0,
+    );
     let second = if facing {
         [v(0., 1., 0.), v(1., 1., 0.), v(1., 1., 1.), v(0., 1., 1.)]
     } else {
@@ -100,7 +105,10 @@ fn unit_squares_match_the_closed_forms_with_the_ray_cast_estimator() {
         let (p, ff) = patches_and_ff(b, &g, 0.25, FormFactorMethod::Raycast { level });
         let f01 = between(&p, &ff, 0, 1);
         let f10 = between(&p, &ff, 1, 0);
-        assert!((f01 - exact).abs() < 1e-3, "facing {facing}: F = {f01}, want {exact}");
+        assert!(
+            (f01 - exact).abs() < 1e-3,
+            "facing {facing}: F = {f01}, want {exact}"
+        );
         // Equal areas: reciprocity makes the two directions equal.
         assert!((f01 - f10).abs() < 1e-6, "{f01} vs {f10}");
     }
@@ -170,7 +178,10 @@ fn rows_of_a_closed_room_sum_to_one_and_are_reciprocal() {
             for (j, f) in ff.row(i) {
                 let a = p.area[i] as f64 * f as f64;
                 let b = p.area[j] as f64 * ff.get(j, i) as f64;
-                assert!((a - b).abs() <= 1e-6 * a.max(b), "A_i F_ij {a} vs A_j F_ji {b}");
+                assert!(
+                    (a - b).abs() <= 1e-6 * a.max(b),
+                    "A_i F_ij {a} vs A_j F_ji {b}"
+                );
             }
         }
     }
@@ -181,16 +192,41 @@ fn rows_of_a_closed_room_sum_to_one_and_are_reciprocal() {
 fn inward_sphere(levels: u32) -> Vec<[Vec3A; 3]> {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let p = [
-        v(-1., t, 0.), v(1., t, 0.), v(-1., -t, 0.), v(1., -t, 0.),
-        v(0., -1., t), v(0., 1., t), v(0., -1., -t), v(0., 1., -t),
-        v(t, 0., -1.), v(t, 0., 1.), v(-t, 0., -1.), v(-t, 0., 1.),
+        v(-1., t, 0.),
+        v(1., t, 0.),
+        v(-1., -t, 0.),
+        v(1., -t, 0.),
+        v(0., -1., t),
+        v(0., 1., t),
+        v(0., -1., -t),
+        v(0., 1., -t),
+        v(t, 0., -1.),
+        v(t, 0., 1.),
+        v(-t, 0., -1.),
+        v(-t, 0., 1.),
     ]
     .map(|q| q.normalize());
     let idx = [
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     let mut tris: Vec<[Vec3A; 3]> = idx.iter().map(|&[a, b, c]| [p[a], p[b], p[c]]).collect();
     for _ in 0..levels {
@@ -285,13 +321,23 @@ fn parallel_plates_exchange_as_infinite_plates_do() {
     quad(
         &mut b,
         &mut g,
-        [v(-half, 0., -half), v(-half, 0., half), v(half, 0., half), v(half, 0., -half)],
+        [
+            v(-half, 0., -half),
+            v(-half, 0., half),
+            v(half, 0., half),
+            v(half, 0., -half),
+        ],
         0,
     );
     quad(
         &mut b,
         &mut g,
-        [v(-half, 1., -half), v(half, 1., -half), v(half, 1., half), v(-half, 1., half)],
+        [
+            v(-half, 1., -half),
+            v(half, 1., -half),
+            v(half, 1., half),
+            v(-half, 1., half),
+        ],
         1,
     );
     let shading = vec![
@@ -317,7 +363,10 @@ fn parallel_plates_exchange_as_infinite_plates_do() {
         }
         let want = if mid.y < 0.5 { 4.0 / 3.0 } else { 2.0 / 3.0 };
         let got = sol.radiosity[p].x;
-        assert!((got - want).abs() / want < 5e-3, "patch at {mid}: B = {got}, want {want}");
+        assert!(
+            (got - want).abs() / want < 5e-3,
+            "patch at {mid}: B = {got}, want {want}"
+        );
         checked += 1;
     }
     assert!(checked >= 16, "{checked}");
@@ -388,7 +437,10 @@ fn progressive_refinement_and_gauss_seidel_reach_the_dense_solution() {
         ("progressive", system.progressive(1e-6, 10_000_000)),
         ("gauss-seidel", system.gauss_seidel(1e-6, 100_000)),
     ] {
-        assert!(report.converged && report.residual < 1e-6, "{name}: {report:?}");
+        assert!(
+            report.converged && report.residual < 1e-6,
+            "{name}: {report:?}"
+        );
         let worst = b
             .iter()
             .zip(&dense)
@@ -402,7 +454,10 @@ fn progressive_refinement_and_gauss_seidel_reach_the_dense_solution() {
 #[test]
 fn the_solution_does_not_depend_on_the_thread_count() {
     let solve = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let (b, g, shading) = small_room();
             let settings = RadiositySettings {
@@ -411,8 +466,88 @@ fn the_solution_does_not_depend_on_the_thread_count() {
                 ..Default::default()
             };
             let s = solve_triangles(b, &g, &shading, DVec3::ZERO, &settings, None).unwrap();
-            s.radiosity.iter().flat_map(|c| c.to_array().map(f32::to_bits)).collect::<Vec<_>>()
+            s.radiosity
+                .iter()
+                .flat_map(|c| c.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
         })
     };
     assert_eq!(solve(1), solve(2));
+}
+
+#[test]
+fn the_patch_size_sets_how_finely_surfaces_are_cut() {
+    // A 2 x 2 x 2 box: 12 triangles of area 2, split until a patch's area
+    // is at most s^2 / 2, so into 4^d with 2 / 4^d <= s^2 / 2.
+    for (s, depth) in [(2.0f32, 0u32), (1.0, 1), (0.5, 2), (0.3, 3)] {
+        let (b, g) = closed_box(2.0, 2.0, 2.0);
+        let shading = vec![(Color::splat(0.5), Color::ZERO); b.len()];
+        let bounds = (Vec3A::ZERO, Vec3A::splat(2.0));
+        let p = Patches::build(b, &g, s, bounds, &shading, 100_000).unwrap();
+        assert_eq!(p.len(), 12 << (2 * depth), "patch size {s}");
+        let largest = p.area.iter().copied().fold(0.0, f32::max);
+        assert!(
+            largest <= 0.5 * s * s * (1.0 + 1e-5),
+            "patch size {s}: area {largest}"
+        );
+        // Only the inside of the box is a surface.
+        assert!((0..p.len()).all(|q| p.surfaces[p.surface[q] as usize].side == 0));
+    }
+}
+
+#[test]
+fn adaptive_subdivision_splits_patches_where_radiosity_changes_fast() {
+    // The small room lit by its ceiling: radiosity changes fastest on the
+    // floor around the block (its contact shadow) and in the room's
+    // corners; the open middle of the floor is smooth.
+    let (b, g, shading) = small_room();
+    let settings = RadiositySettings {
+        patch_size: Some(0.25),
+        refine_levels: 1,
+        ..Default::default()
+    };
+    let sol = solve_triangles(b, &g, &shading, DVec3::ZERO, &settings, None).unwrap();
+    assert_eq!(sol.stats.passes, 2, "{:?}", sol.stats);
+    assert!(sol.stats.refined > 0, "{:?}", sol.stats);
+    let p = &sol.patches;
+    // The floor's triangles (area 1) are cut into 64 by the patch size;
+    // a refined patch is a quarter of that.
+    let full = 1.0 / 64.0;
+    // Floor patches (y = 0, facing up): split ones within 0.25 of the
+    // block, along the walls (the room's corners), and in the open.
+    let (mut near, mut walls, mut open) = (0, 0, 0);
+    let mut open_area = 0.0f32;
+    for q in 0..p.len() {
+        let c = p.corners(q);
+        if !(c.iter().all(|x| x.y == 0.0) && p.normal(q).y > 0.5) {
+            continue;
+        }
+        let m = (c[0] + c[1] + c[2]) / 3.0;
+        // Distance to the block's footprint [0.5, 1] x [0.25, 0.75].
+        let dx = (0.5 - m.x).max(m.x - 1.0).max(0.0);
+        let dz = (0.25 - m.z).max(m.z - 0.75).max(0.0);
+        let by_block = (dx * dx + dz * dz).sqrt() < 0.25;
+        let by_wall = m.x.min(2.0 - m.x).min(m.z).min(1.0 - m.z) < 0.25;
+        let split = p.area[q] < 0.5 * full;
+        if !by_block && !by_wall {
+            open_area += p.area[q];
+        }
+        if split {
+            match (by_block, by_wall) {
+                (true, _) => near += 1,
+                (false, true) => walls += 1,
+                (false, false) => open += 1,
+            }
+        }
+    }
+    eprintln!(
+        "floor patches from splits: {near} by the block, {walls} along the walls, {open} in the \
+         open (area {open_area:.3}); {:?}",
+        sol.stats
+    );
+    assert!(near >= 16, "{near} patches from splits around the block");
+    assert!(
+        open_area > 0.2 && open == 0,
+        "{open} split in the open middle of the floor"
+    );
 }

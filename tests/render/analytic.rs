@@ -189,6 +189,7 @@ material = { color = 0.0, emission = [0, 0, 1] }
             up: Vec3::Y,
             vfov_degrees: 20.0,
             name: None,
+            ..Default::default()
         },
         w,
         h,
@@ -259,6 +260,7 @@ illuminance = 3.0
             up: Vec3::Y,
             vfov_degrees: 45.0,
             name: None,
+            ..Default::default()
         },
         w,
         h,
@@ -376,6 +378,7 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
             up: Vec3::Y,
             vfov_degrees: 12.0,
             name: None,
+            ..Default::default()
         },
         120,
         120,

@@ -9,6 +9,8 @@
 //!   through the `prism` binary, mirror, lens, shadows, determinism);
 //! * `cargo test --test render path::` — path transport against analytic
 //!   answers (white furnace, area lights) and the Whitted tracer;
+//! * `cargo test --test render photon::` — photon transport against the
+//!   path tracer (Cornell box) and bit for bit across thread counts;
 //! * `cargo test --test render radiosity::` — radiosity transport: the
 //!   Cornell box against the path tracer, the solution reused while the
 //!   camera moves, thread-count independence, refused input;
@@ -21,15 +23,23 @@
 //! * `cargo test --test render shards::` — region and sample-range shards
 //!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
-//!   closed form, feature lines and their vector (SVG) form.
+//!   closed form, feature lines and their vector (SVG) form;
+//! * `cargo test --test render overlay::` — the structure overlays
+//!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
+//!   clipping and visibility against independent f64 and brute-force
+//!   answers, and the kd-tree's planes counted.
 
 #[path = "../common/mod.rs"]
 mod common;
 
 mod analytic;
+mod environment;
 mod illustration;
 mod large_worlds;
+mod models;
+mod overlay;
 mod path;
+mod photon;
 mod radiosity;
 mod robustness;
 mod scene_updates;

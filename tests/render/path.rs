@@ -134,6 +134,7 @@ fn floor_scene(light: &str) -> (String, Camera) {
         up: Vec3::Z,
         vfov_degrees: 60.0,
         name: None,
+        ..Default::default()
     };
     let scene = format!(
         r#"

@@ -182,6 +182,7 @@ fn glass(ior: f32) -> SurfaceSample {
         emission: Color::ZERO,
         base: Color::ONE,
         diffuse_weight: 0.0,
+        gltf: None,
     }
 }
 

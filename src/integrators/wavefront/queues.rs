@@ -290,26 +290,39 @@ soa_queue!(
     ]
 );
 
-/// Rays that left the scene: they bring back the background.
+/// Rays that left the scene: they bring back the background or the
+/// environment.
 #[derive(Clone, Debug, Default)]
 pub struct EscapedQueue {
     /// Path throughputs.
     pub throughput: Vec<Color>,
     /// Path indices.
     pub path: Vec<u32>,
+    /// Directions (unit), where the environment is looked up.
+    pub direction: Vec<Vec3A>,
+    /// Direction densities (path tracing; see [`RayItem::pdf`]), for
+    /// multiple importance sampling of the environment.
+    pub pdf: Vec<f32>,
 }
 
 impl EscapedQueue {
     /// Appends an escaped ray.
     #[inline]
-    pub fn push(&mut self, path: u32, throughput: Color) {
+    pub fn push(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
         debug_assert!(throughput.is_finite());
         self.throughput.push(throughput);
         self.path.push(path);
+        self.direction.push(direction);
+        self.pdf.push(pdf);
     }
 }
 
-soa_queue!(EscapedQueue, "escaped rays", path, [throughput, path]);
+soa_queue!(
+    EscapedQueue,
+    "escaped rays",
+    path,
+    [throughput, path, direction, pdf]
+);
 
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]

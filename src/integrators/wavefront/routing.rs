@@ -66,7 +66,12 @@ impl RoutedChunk {
         found: Option<Hit>,
     ) {
         match found {
-            None => self.escaped.push(rays.path[i], rays.throughput[i]),
+            None => self.escaped.push(
+                rays.path[i],
+                rays.throughput[i],
+                rays.direction[i],
+                rays.pdf[i],
+            ),
             Some(h) => {
                 let class = classes[h.material as usize];
                 self.hits.0[class as usize].push(HitItem::new(&h, &rays.get(i)));

@@ -20,7 +20,7 @@ use crate::integrators::wavefront::queues::{
 use crate::integrators::wavefront::routing::{
     ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
 };
-use crate::integrators::{accumulate, film_sample};
+use crate::integrators::{accumulate, camera_ray};
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
@@ -51,7 +51,7 @@ pub fn generate_camera_rays(
             k.pixel(settings.width),
             k.sample,
         );
-        let ray = camera.ray(film_sample(k.x, k.y, settings.spp, &mut sampler));
+        let ray = camera_ray(camera, k.x, k.y, settings.spp, &mut sampler);
         out.push(RayItem {
             ray,
             throughput: Color::ONE,
@@ -133,10 +133,25 @@ fn one_octant(rays: &[Ray]) -> bool {
     rays.iter().all(|r| octant(r) == first)
 }
 
-/// Stage: escaped rays bring back the background.
-pub fn handle_escaped_rays(escaped: &EscapedQueue, background: Color, radiance: &mut [Color]) {
-    for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
-        radiance[path as usize] += t * background;
+/// Stage: escaped rays bring back the background, or the environment
+/// (weighted against its next-event samples under path transport, as
+/// [`path::escaped`] weighs it).
+pub fn handle_escaped_rays(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    escaped: &EscapedQueue,
+    radiance: &mut [Color],
+) {
+    if scene.environment().is_none() {
+        let background = scene.background();
+        for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
+            radiance[path as usize] += t * background;
+        }
+        return;
+    }
+    for i in 0..escaped.len() {
+        let l = path::escaped(scene, settings, escaped.direction[i], escaped.pdf[i]);
+        radiance[escaped.path[i] as usize] += escaped.throughput[i] * l;
     }
 }
 
