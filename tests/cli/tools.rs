@@ -211,6 +211,11 @@ fn tradeoff(out: &Path, extra: &[&str]) -> Output {
             "8",
             "--reference-spp",
             "32",
+            // A coarse radiosity solve for the transport knob's row.
+            "--patch-size",
+            "1.4",
+            "--refine-levels",
+            "0",
             "-q",
         ])
         .args(extra)

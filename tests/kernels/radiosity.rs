@@ -105,6 +105,7 @@ fn unit_squares_match_the_closed_forms_with_the_ray_cast_estimator() {
         let (p, ff) = patches_and_ff(b, &g, 0.25, FormFactorMethod::Raycast { level });
         let f01 = between(&p, &ff, 0, 1);
         let f10 = between(&p, &ff, 1, 0);
+        eprintln!("facing {facing}: F = {f01:.6} (and {f10:.6} back), exact {exact}");
         assert!(
             (f01 - exact).abs() < 1e-3,
             "facing {facing}: F = {f01}, want {exact}"

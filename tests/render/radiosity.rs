@@ -270,6 +270,33 @@ fn the_command_line_refuses_a_zero_patch_size() {
             "{bad}: {err}"
         );
     }
+    // The same options in a scene file's [settings.radiosity].
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("never.png");
+    for (table, words) in [
+        ("patch_size = 0.0", &["patch size"][..]),
+        ("tolerance = nan", &["tolerance", "NaN"][..]),
+        ("hemicube_resolution = 3", &["hemicube resolution"][..]),
+        ("solver = \"jacobi\"", &["jacobi"][..]),
+    ] {
+        let scene = dir.path().join("bad.toml");
+        std::fs::write(
+            &scene,
+            format!("{}\n[settings.radiosity]\n{table}\n", lit_room("")),
+        )
+        .unwrap();
+        let out = prism()
+            .args(["render", "-q", "-o"])
+            .arg(&png)
+            .arg(&scene)
+            .output()
+            .unwrap();
+        let err = assert_failed_without_panic(&out);
+        for w in words {
+            assert!(err.contains(w), "{table}: {err}");
+        }
+        assert!(!png.exists(), "{table}: an image was written");
+    }
 }
 
 /// `prism render --transport radiosity` on the Cornell box: no default

@@ -96,6 +96,9 @@ pub struct TradeoffArgs {
     /// `transport` and `photon-iterations` knobs).
     #[command(flatten)]
     pub photon: PhotonFlags,
+    /// Radiosity's settings for the radiosity row of the `transport` knob.
+    #[command(flatten)]
+    pub radiosity: crate::radiosity_args::RadiosityFlags,
     /// `--integrator`.
     #[command(flatten)]
     pub integrator: IntegratorFlag,
@@ -130,7 +133,7 @@ pub enum Knob {
     RussianRoulette,
     /// BVH build preset, fastest to very slow (the scene is reloaded).
     Bvh,
-    /// Light transport: Whitted, path tracing, photon mapping.
+    /// Light transport: Whitted, path tracing, photon mapping, radiosity.
     Transport,
     /// Random numbers: Owen-scrambled Sobol against independent hashes.
     Sampler,
@@ -473,6 +476,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         rr_start_depth: args.path.rr_depth.map(Some),
         sampler: args.path.sampler(),
         photon: args.photon.overrides(),
+        radiosity: args.radiosity.desc(),
         ..args.frame.desc()
     }
     .resolve(&base_desc.settings);
