@@ -172,18 +172,24 @@ impl SceneDesc {
     }
 
     /// True when the scene is lit under `transport`: it has a punctual
-    /// light, or (path, photon and radiosity transport, where emissive
-    /// surfaces light the scene) an emissive surface.
+    /// light; or, under path, photon and radiosity transport (where
+    /// emissive surfaces are area lights, emit photons or are the
+    /// solution's sources), an emissive surface; or, under
+    /// path transport (the only one that samples it as a light), an
+    /// environment.
     pub fn is_lit(&self, transport: crate::core::settings::Transport) -> bool {
         use crate::core::settings::Transport;
+        let emissive = || {
+            self.objects
+                .iter()
+                .any(|o| o.material.emission.max_element() > 0.0)
+        };
         !self.lights.is_empty()
             || (matches!(
                 transport,
                 Transport::Path | Transport::Photon | Transport::Radiosity
-            ) && self
-                .objects
-                .iter()
-                .any(|o| o.material.emission.max_element() > 0.0))
+            ) && emissive())
+            || (transport == Transport::Path && self.environment.is_some())
     }
 
     /// Gives a scene without a camera one, the way glTF viewers show a

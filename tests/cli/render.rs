@@ -770,5 +770,12 @@ fn photon_options_reject_bad_input_cleanly() {
         "[settings]\ntransport = \"photon\"\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
     )
     .unwrap();
-    assert_clean_failure(&render(&dark, &out, &[]), &out, &["needs a light"]);
+    // It gets the default key light, like any unlit scene, and renders.
+    let o = render(&dark, &out, &[]);
+    assert_success(&o);
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("adding a white directional key light"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
