@@ -149,7 +149,7 @@ impl RadiositySettings {
             ));
         }
         let r = self.hemicube_resolution;
-        if !(4..=1024).contains(&r) || r % 2 != 0 {
+        if !(4..=1024).contains(&r) || !r.is_multiple_of(2) {
             return Err(format!(
                 "hemicube resolution must be an even number from 4 to 1024, got {r}"
             ));

@@ -31,6 +31,7 @@ const PIXEL_DIMENSIONS: u32 = 2;
 
 /// Radiance along `ray` (in the scene's frame) under the radiosity
 /// solution `sol`.
+#[allow(clippy::too_many_arguments)]
 pub fn trace(
     scene: &RenderScene,
     sol: &Solution,

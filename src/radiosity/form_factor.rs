@@ -508,8 +508,8 @@ pub fn compute(
     let done = AtomicU64::new(0);
     let tick = || {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-        if d % 64 == 0 || d == n as u64 {
-            progress(if d % 64 == 0 { 64 } else { d % 64 });
+        if d.is_multiple_of(64) || d == n as u64 {
+            progress(if d.is_multiple_of(64) { 64 } else { d % 64 });
         }
     };
     match method {

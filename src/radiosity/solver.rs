@@ -132,9 +132,8 @@ impl System<'_> {
             // The patch with the most unshot power.
             let mut best = None;
             let mut most = 0.0f64;
-            for i in 0..n {
-                let u = unshot[i];
-                let p = self.area[i] as f64 * (u.x + u.y + u.z);
+            for (i, (u, &a)) in unshot.iter().zip(self.area).enumerate() {
+                let p = a as f64 * (u.x + u.y + u.z);
                 if p > most {
                     most = p;
                     best = Some(i);
@@ -167,6 +166,7 @@ impl System<'_> {
     pub fn dense(&self) -> Vec<Color> {
         let n = self.e.len();
         let mut out = vec![Color::ZERO; n];
+        #[allow(clippy::needless_range_loop)] // c indexes channels of several arrays
         for c in 0..3 {
             let mut m = vec![0.0f64; n * (n + 1)];
             for i in 0..n {
