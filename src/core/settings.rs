@@ -48,6 +48,39 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// A panoramic camera instead of the perspective one (`None`): every
+    /// direction around the eye, see [`Panorama`].
+    pub panorama: Option<Panorama>,
+}
+
+/// A panoramic camera projection: the image holds every direction around
+/// the camera's eye, in the camera's frame (the forward direction is the
+/// environment map's `+X`, the camera's up its `+Y`, its right `+Z`), so
+/// that a panorama read back as an environment (turned to the camera's
+/// heading) lights a scene as the rendered one looked.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Panorama {
+    /// Latitude-longitude (360 x 180 degrees), the environment map's layout:
+    /// column `x` is `u = x / width`, row `y` is `v = y / height`.
+    Equirect,
+    /// Six square 90-degree faces side by side, `width = 6 height`, in
+    /// the order `+X, -X, +Y, -Y, +Z, -Z` of the map frame (front, back,
+    /// up, down, right, left); each face is the perspective view from the
+    /// eye with `+Y` up (`-X` up for the `+Y` face, `+X` for `-Y`).
+    Cubemap,
+}
+
+impl Panorama {
+    /// Lower-case name, as on the command line and in scene files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Panorama::Equirect => "equirect",
+            Panorama::Cubemap => "cubemap",
+        }
+    }
 }
 
 /// How surfaces with a diffuse or glossy lobe are shaded.
@@ -263,6 +296,7 @@ impl Default for RenderSettings {
             gooch: GoochParams::default(),
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
+            panorama: None,
         }
     }
 }
@@ -346,6 +380,22 @@ impl RenderSettings {
             );
         }
         self.gooch.validate()?;
+        if let Some(p) = self.panorama {
+            if p == Panorama::Cubemap && self.width != 6 * self.height {
+                return Err(format!(
+                    "a cube-map panorama is six square faces side by side: its width must be \
+                     6 x its height, got {}x{}",
+                    self.width, self.height
+                ));
+            }
+            if self.lines.is_some() {
+                return Err(format!(
+                    "feature lines are drawn for the perspective camera; they do not combine \
+                     with the {} panorama",
+                    p.name()
+                ));
+            }
+        }
         if let Some(l) = &self.lines {
             l.validate()?;
         }

@@ -81,6 +81,9 @@ pub struct SettingsDesc {
     pub lines: Option<crate::core::settings::LineSettings>,
     /// Random numbers.
     pub sampler: Option<crate::core::rng::SamplerKind>,
+    /// Camera projection: `Some(None)` is the perspective camera,
+    /// `Some(Some(p))` a panorama.
+    pub panorama: Option<Option<crate::core::settings::Panorama>>,
 }
 
 impl SettingsDesc {
@@ -112,6 +115,7 @@ impl SettingsDesc {
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
             lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
+            panorama: self.panorama.or(under.panorama).unwrap_or(d.panorama),
         }
     }
 }

@@ -80,6 +80,16 @@ struct FileSettings {
     lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
+    /// `"perspective"`, `"equirect"` or `"cubemap"`.
+    camera_projection: Option<FileProjection>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileProjection {
+    Perspective,
+    Equirect,
+    Cubemap,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -551,6 +561,11 @@ impl Ctx<'_> {
             sampler: s.sampler.map(|k| match k {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
+            }),
+            panorama: s.camera_projection.map(|p| match p {
+                FileProjection::Perspective => None,
+                FileProjection::Equirect => Some(crate::core::settings::Panorama::Equirect),
+                FileProjection::Cubemap => Some(crate::core::settings::Panorama::Cubemap),
             }),
         })
     }

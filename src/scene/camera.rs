@@ -1,9 +1,12 @@
-//! Pinhole camera: rays through an image plane.
+//! Pinhole camera: rays through an image plane (or, for panoramas, in
+//! every direction: [`crate::scene::panorama`]).
 
 use bevy_ecs::component::Component;
 use glam::{DVec3, Mat3A, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
+use crate::core::settings::Panorama;
+use crate::scene::panorama::PanoramaRays;
 
 /// A pinhole camera looking from `look_from` towards `look_at`.
 ///
@@ -75,6 +78,8 @@ pub struct CameraRays {
     dx: Vec3A,
     /// Step per pixel downwards.
     dy: Vec3A,
+    /// A panorama instead of the image plane (`None`: perspective).
+    panorama: Option<PanoramaRays>,
 }
 
 impl CameraRays {
@@ -102,7 +107,41 @@ impl CameraRays {
             top_left: top_left.into(),
             dx: (right * (2.0 * half_w / width as f32)).into(),
             dy: (-up * (2.0 * half_h / height as f32)).into(),
+            panorama: None,
         }
+    }
+
+    /// Prepares `camera` for a `width` x `height` panorama of kind
+    /// `panorama` in the frame centred on `origin`, or for its perspective
+    /// view when `panorama` is `None` (exactly
+    /// [`CameraRays::relative_to`]). The panorama's map frame is the
+    /// camera's: `+X` its viewing direction, `+Y` its up, `+Z` its right
+    /// (see [`crate::scene::panorama`]); the field of view is not used.
+    pub fn panoramic(
+        camera: &Camera,
+        origin: DVec3,
+        width: u32,
+        height: u32,
+        panorama: Option<Panorama>,
+    ) -> Self {
+        let mut rays = Self::relative_to(camera, origin, width, height);
+        if let Some(kind) = panorama {
+            let forward = (camera.look_at - camera.look_from).normalize().as_vec3();
+            let right = forward.cross(camera.up).normalize();
+            let up = right.cross(forward);
+            rays.panorama = Some(PanoramaRays::new(
+                kind,
+                [forward.into(), up.into(), right.into()],
+                width,
+                height,
+            ));
+        }
+        rays
+    }
+
+    /// The panorama these rays cover, if they are panoramic.
+    pub fn panorama(&self) -> Option<&PanoramaRays> {
+        self.panorama.as_ref()
     }
 
     /// The ray through film position `p` in pixels (`(0,0)` is the top-left
@@ -110,6 +149,9 @@ impl CameraRays {
     /// The direction is unit length.
     #[inline]
     pub fn ray(&self, p: Vec2) -> Ray {
+        if let Some(pano) = &self.panorama {
+            return Ray::new(self.origin, pano.direction(p));
+        }
         let d = self.top_left + self.dx * p.x + self.dy * p.y;
         Ray::new(self.origin, d.normalize())
     }

@@ -18,7 +18,9 @@
 //! * `cargo test --test render shards::` — region and sample-range shards
 //!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
-//!   closed form, feature lines and their vector (SVG) form.
+//!   closed form, feature lines and their vector (SVG) form;
+//! * `cargo test --test render panorama::` — equirectangular and cube-map
+//!   panoramas read back as environments, and against each other.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -27,6 +29,7 @@ mod analytic;
 mod environment;
 mod illustration;
 mod large_worlds;
+mod panorama;
 mod path;
 mod robustness;
 mod scene_updates;

@@ -99,6 +99,9 @@ pub struct RenderArgs {
     /// scene file's own camera first, then those of included glTF files).
     #[arg(long, default_value_t = 0)]
     camera: usize,
+    /// `--camera-projection`.
+    #[command(flatten)]
+    projection: crate::args::ProjectionFlag,
     /// Exposure in stops for PNG output: radiance is scaled by 2^EV
     /// [default: the scene's, else 0].
     #[arg(long, value_name = "EV", allow_hyphen_values = true)]
@@ -386,6 +389,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
         sampler: args.path.sampler(),
+        panorama: args.projection.get(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
@@ -424,6 +428,13 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         return Err(Error::Invalid(format!(
             "--camera {}: the scene has {camera_count} camera(s), numbered from 0",
             args.camera
+        )));
+    }
+    if let (Some(p), Some(_)) = (settings.panorama, &args.lines_svg) {
+        return Err(Error::Invalid(format!(
+            "--lines-svg projects onto the perspective camera's image; it does not combine \
+             with the {} panorama",
+            p.name()
         )));
     }
     let light_count = desc.lights.len();
