@@ -30,6 +30,7 @@
 pub mod components;
 pub mod demo;
 pub mod frame;
+pub mod lightfield;
 pub mod lines;
 pub mod render;
 pub mod renderer;

@@ -84,6 +84,9 @@ pub struct SettingsDesc {
     /// Camera projection: `Some(None)` is the perspective camera,
     /// `Some(Some(p))` a panorama.
     pub panorama: Option<Option<crate::core::settings::Panorama>>,
+    /// The light-field capture rig (`[lightfield]`), for `prism lightfield
+    /// capture`; not part of [`SettingsDesc::resolve`].
+    pub lightfield: Option<crate::core::settings::LightFieldSettings>,
 }
 
 impl SettingsDesc {

@@ -40,6 +40,17 @@ struct FileScene {
     #[serde(default)]
     gltf: Vec<FileInclude>,
     environment: Option<FileEnvironment>,
+    lightfield: Option<FileLightField>,
+}
+
+/// `[lightfield]`: the capture rig of `prism lightfield capture`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileLightField {
+    grid: Option<[u32; 2]>,
+    spacing: Option<f64>,
+    resolution: Option<[u32; 2]>,
+    focal_distance: Option<f64>,
 }
 
 /// `[environment]`: an equirectangular map (`path`) or a uniform `color`,
@@ -146,6 +157,9 @@ struct FileCamera {
     up: [f32; 3],
     #[serde(default = "default_vfov")]
     vfov: f32,
+    /// Lens shift `[right, up]` in image heights.
+    #[serde(default)]
+    shift: [f32; 2],
 }
 
 fn default_up() -> [f32; 3] {
@@ -430,6 +444,17 @@ impl Ctx<'_> {
             settings: self.settings(&file.settings)?,
             ..Default::default()
         };
+        if let Some(l) = &file.lightfield {
+            let l = crate::core::settings::LightFieldSettings {
+                grid: l.grid,
+                spacing: l.spacing,
+                resolution: l.resolution,
+                focal_distance: l.focal_distance,
+            };
+            l.validate()
+                .map_err(|m| self.err(format!("lightfield: {m}")))?;
+            scene.settings.lightfield = Some(l);
+        }
         if let Some(bg) = file.settings.background {
             scene.background =
                 non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
@@ -567,6 +592,7 @@ impl Ctx<'_> {
                 FileProjection::Equirect => Some(crate::core::settings::Panorama::Equirect),
                 FileProjection::Cubemap => Some(crate::core::settings::Panorama::Cubemap),
             }),
+            lightfield: None,
         })
     }
 
@@ -576,6 +602,7 @@ impl Ctx<'_> {
             look_at: finite3d("camera.look_at", c.look_at)?,
             up: finite3("camera.up", c.up)?,
             vfov_degrees: c.vfov,
+            shift: glam::Vec2::from(c.shift),
             name: None,
         };
         cam.validate()?;

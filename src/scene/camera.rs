@@ -23,6 +23,13 @@ pub struct Camera {
     pub up: Vec3,
     /// Vertical field of view in degrees.
     pub vfov_degrees: f32,
+    /// Lens shift: the image window slides in its own plane, right by
+    /// `shift.x` and up by `shift.y` image heights, while the eye and the
+    /// viewing direction stay put (an off-axis view, as a shift lens or
+    /// Blender's camera shift, relative to the height here). Zero is the
+    /// usual centred view; light-field cameras use it so that every view
+    /// frames the same window of the focal plane.
+    pub shift: Vec2,
     /// Optional name (from glTF).
     pub name: Option<String>,
 }
@@ -34,6 +41,7 @@ impl Default for Camera {
             look_at: DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 40.0,
+            shift: Vec2::ZERO,
             name: None,
         }
     }
@@ -63,6 +71,9 @@ impl Camera {
                 "camera vertical field of view must be in (0, 180) degrees, got {}",
                 self.vfov_degrees
             ));
+        }
+        if !self.shift.is_finite() {
+            return Err(format!("camera shift must be finite, got {}", self.shift));
         }
         Ok(())
     }
@@ -101,7 +112,11 @@ impl CameraRays {
         let up = right.cross(forward);
         let half_h = (camera.vfov_degrees.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height as f32;
-        let top_left = forward - right * half_w + up * half_h;
+        // The window's centre, moved by the shift (in image heights).
+        let centre = forward
+            + right * (2.0 * half_h * camera.shift.x)
+            + up * (2.0 * half_h * camera.shift.y);
+        let top_left = centre - right * half_w + up * half_h;
         Self {
             origin: (camera.look_from - origin).as_vec3a(),
             top_left: top_left.into(),

@@ -45,12 +45,7 @@ impl PanoramaRays {
     /// unit viewing direction, up and right are `forward`, `up` and
     /// `right` (orthonormal, `right = forward x up`); see
     /// [`crate::scene::camera::CameraRays::panoramic`].
-    pub fn new(
-        kind: Panorama,
-        [forward, up, right]: [Vec3A; 3],
-        width: u32,
-        height: u32,
-    ) -> Self {
+    pub fn new(kind: Panorama, [forward, up, right]: [Vec3A; 3], width: u32, height: u32) -> Self {
         Self {
             kind,
             forward,

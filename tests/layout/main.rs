@@ -27,6 +27,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("transport", 4),
     ("io", 4),
     ("integrators", 5),
+    ("lightfield", 5),
     ("systems", 6),
 ];
 

@@ -20,7 +20,10 @@
 //! * `cargo test --test render illustration::` — Gooch shading against its
 //!   closed form, feature lines and their vector (SVG) form;
 //! * `cargo test --test render panorama::` — equirectangular and cube-map
-//!   panoramas read back as environments, and against each other.
+//!   panoramas read back as environments, and against each other;
+//! * `cargo test --test render lightfield::` — views synthesised from
+//!   captured light fields against the captures and direct renders, and
+//!   bad light fields refused.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -29,6 +32,7 @@ mod analytic;
 mod environment;
 mod illustration;
 mod large_worlds;
+mod lightfield;
 mod panorama;
 mod path;
 mod robustness;

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use glam::{DVec3, Vec2, Vec3A};
+use glam::{DVec3, Vec2};
 use prism::core::math::Color;
 use prism::core::settings::{Panorama, RenderSettings};
 use prism::image::film::Film;
@@ -117,7 +117,12 @@ fn relative_rmse(a: &Film, b: &Film) -> f64 {
         .map(|(x, y)| ((*x - *y) * (*x - *y)).element_sum() as f64 / 3.0)
         .sum::<f64>()
         / n;
-    let mean: f64 = b.pixels.iter().map(|x| x.element_sum() as f64 / 3.0).sum::<f64>() / n;
+    let mean: f64 = b
+        .pixels
+        .iter()
+        .map(|x| x.element_sum() as f64 / 3.0)
+        .sum::<f64>()
+        / n;
     mse.sqrt() / mean
 }
 
@@ -149,7 +154,10 @@ fn equirect_panorama_reads_back_as_the_environment() {
         .collect();
     let mut worst = Vec::new();
     for (pw, ph) in [(256, 128), (512, 256), (1024, 512)] {
-        let pano = render_scene(panorama_camera(), settings(pw, ph, Some(Panorama::Equirect)));
+        let pano = render_scene(
+            panorama_camera(),
+            settings(pw, ph, Some(Panorama::Equirect)),
+        );
         assert!(pano.is_finite());
         let map = EnvironmentMap::new(pw, ph, pano.pixels.clone()).unwrap();
         let env = Environment::new(EnvironmentSource::Map(Arc::new(map)), 1.0, 0.0);
@@ -168,16 +176,20 @@ fn equirect_panorama_reads_back_as_the_environment() {
                 environment: Some(env.clone()),
                 ..Default::default()
             };
-            let read_back =
-                render_desc(desc, config(settings(w, h, None), IntegratorKind::Recursive))
-                    .film
-                    .unwrap();
+            let read_back = render_desc(
+                desc,
+                config(settings(w, h, None), IntegratorKind::Recursive),
+            )
+            .film
+            .unwrap();
             let rays = CameraRays::new(&view, w, h);
             let mut exact = 0;
             for y in 0..h {
                 for x in 0..w {
-                    let d = rays.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5)).direction;
-                    let q = pano_rays.film_position(Vec3A::from(d));
+                    let d = rays
+                        .ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+                        .direction;
+                    let q = pano_rays.film_position(d);
                     let i = (q.x.floor() as i64).clamp(0, pw as i64 - 1) as u32;
                     let j = (q.y.floor() as i64).clamp(0, ph as i64 - 1) as u32;
                     if read_back.get(x, y) == pano.get(i, j) {
@@ -186,7 +198,10 @@ fn equirect_panorama_reads_back_as_the_environment() {
                 }
             }
             let n = (w * h) as usize;
-            assert!(exact * 1000 >= n * 995, "{pw}x{ph}: only {exact} of {n} pixels read their own texel");
+            assert!(
+                exact * 1000 >= n * 995,
+                "{pw}x{ph}: only {exact} of {n} pixels read their own texel"
+            );
             errors.push(relative_rmse(&read_back, direct));
         }
         eprintln!("{pw}x{ph}: relative RMSE per view {errors:.4?}");
@@ -216,7 +231,10 @@ fn equirect_panorama_reads_back_as_the_environment() {
 #[test]
 fn cube_map_agrees_with_equirect() {
     let face = 49;
-    let cube = render_scene(tilted_camera(), settings(6 * face, face, Some(Panorama::Cubemap)));
+    let cube = render_scene(
+        tilted_camera(),
+        settings(6 * face, face, Some(Panorama::Cubemap)),
+    );
     assert!(cube.is_finite());
     // Texel centres fall on u = 1/2 for an odd width, on u = 1/4 for a
     // width of 4k + 2; on v = 1/2 for an odd height.
@@ -250,8 +268,10 @@ fn cube_map_agrees_with_equirect() {
         let mut within = 0;
         for y in 0..face {
             for x in 0..6 * face {
-                let d = cube_rays.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5)).direction;
-                let q = eq.film_position(Vec3A::from(d));
+                let d = cube_rays
+                    .ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+                    .direction;
+                let q = eq.film_position(d);
                 let i = (q.x.floor() as i64).clamp(0, pw as i64 - 1) as u32;
                 let j = (q.y.floor() as i64).clamp(0, ph as i64 - 1) as u32;
                 let e = equirect.get(i, j);
@@ -265,7 +285,9 @@ fn cube_map_agrees_with_equirect() {
         errors.push(relative_rmse(&resampled, &cube));
         close = within as f64 / (6 * face * face) as f64;
     }
-    eprintln!("relative RMSE at 256x128, 512x256, 1024x512: {errors:.4?}; within 2% at 1024x512: {close:.3}");
+    eprintln!(
+        "relative RMSE at 256x128, 512x256, 1024x512: {errors:.4?}; within 2% at 1024x512: {close:.3}"
+    );
     assert!(errors[2] < 0.8 * errors[0], "{errors:?}");
     assert!(close >= 0.9, "{close}");
 }

@@ -85,6 +85,7 @@ pub(super) fn convert_camera(
         look_at: position + forward,
         up,
         vfov_degrees: yfov.to_degrees(),
+        shift: glam::Vec2::ZERO,
         name: camera.name().map(str::to_string),
     };
     result.validate().map_err(|e| format!("{label}: {e}"))?;
