@@ -307,6 +307,7 @@ impl DemoScene {
                 vfov_degrees: 45.0,
                 shift: glam::Vec2::ZERO,
                 name: None,
+                ..Default::default()
             })
             .id()
     }

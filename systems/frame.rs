@@ -127,6 +127,8 @@ pub struct Frame {
     pub line_rays: u64,
     /// Seconds spent finding lines.
     pub line_seconds: f64,
+    /// What the photon passes did, for photon-mapped frames.
+    pub photon: Option<crate::integrators::photon::PhotonReport>,
 }
 
 /// Where the render origin (floating origin) goes. Entities keep their

@@ -9,6 +9,7 @@ use bevy_ecs::prelude::*;
 use super::frame::{
     AccumulationState, ExtractedScene, Frame, ProgressiveRendering, RenderConfig, SceneAccel,
 };
+use crate::core::settings::Transport;
 use crate::integrators::progressive::Accumulator;
 use crate::integrators::{self, IntegratorKind};
 use crate::scene::RenderScene;
@@ -64,6 +65,10 @@ pub fn render_recursive(world: &mut World) {
         return;
     };
     let config = world.resource::<RenderConfig>().clone();
+    if config.settings.transport == Transport::Photon {
+        render_photon(world, &scene, &camera, &config);
+        return;
+    }
     let progressive = world
         .get_resource::<ProgressiveRendering>()
         .is_some_and(|p| p.enabled);
@@ -97,6 +102,31 @@ pub fn render_recursive(world: &mut World) {
     frame.sums = sums;
     frame.counters = counters;
     frame.samples = config.settings.spp;
+}
+
+/// Photon transport: every frame runs all its iterations (progressive
+/// accumulation does not apply; the iterations already refine the image).
+fn render_photon(world: &mut World, scene: &RenderScene, camera: &Camera, config: &RenderConfig) {
+    let start = Instant::now();
+    let progress = config
+        .progress
+        .as_deref()
+        .map(|p| p as integrators::Progress<'_>);
+    let result = integrators::photon::render(scene, camera, &config.settings, progress);
+    let mut frame = world.resource_mut::<Frame>();
+    match result {
+        Ok((film, counters, report)) => {
+            frame.render_seconds = start.elapsed().as_secs_f64();
+            frame.film = Some(film);
+            frame.counters = counters;
+            frame.samples = config
+                .settings
+                .spp
+                .saturating_mul(config.settings.photon.iterations);
+            frame.photon = Some(report);
+        }
+        Err(e) => frame.error = Some(e),
+    }
 }
 
 /// Adds `spp` samples to the running sums, after starting them again if

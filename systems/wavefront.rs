@@ -543,6 +543,12 @@ pub fn update_film(
     });
 }
 
+/// Why the wavefront integrator refuses photon transport.
+pub const PHOTON_ON_WAVEFRONT: &str = "photon transport runs on the recursive integrator (--integrator recursive): \
+its photon pass is already one parallel light-side pass, and its camera side (a specular chain per sample \
+that reads the photon maps at diffuse surfaces, with optional final gathering) has no stage in the \
+wavefront's material-class queues yet";
+
 /// Renders one frame with the wavefront integrator: runs the batch and
 /// bounce schedules until every path is finished, then writes [`Frame`].
 pub fn render_wavefront(world: &mut World) {
@@ -551,6 +557,10 @@ pub fn render_wavefront(world: &mut World) {
     };
     let config = world.resource::<RenderConfig>().clone();
     let settings = &config.settings;
+    if settings.transport == crate::core::settings::Transport::Photon {
+        world.resource_mut::<Frame>().error = Some(PHOTON_ON_WAVEFRONT.into());
+        return;
+    }
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
     // Gooch shading traces no shadow rays.

@@ -326,3 +326,94 @@ impl Grid {
         any
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether the segment `o + d t`, `t` in `[t0, t1]`, meets the box
+    /// `[lo, hi]` (slabs in f64).
+    fn meets(o: DVec3, d: DVec3, t0: f64, t1: f64, lo: DVec3, hi: DVec3) -> bool {
+        let (mut a, mut b) = (t0, t1);
+        for k in 0..3 {
+            if d[k] == 0.0 {
+                if o[k] < lo[k] || o[k] > hi[k] {
+                    return false;
+                }
+            } else {
+                let (p, q) = ((lo[k] - o[k]) / d[k], (hi[k] - o[k]) / d[k]);
+                a = a.max(p.min(q));
+                b = b.min(p.max(q));
+            }
+        }
+        a <= b
+    }
+
+    /// The walk's contract: every primitive whose box, grown by half the
+    /// margin on each axis, meets the ray within `[t_min, t_max]` is
+    /// offered to `visit`, once (the margin covers what the watertight
+    /// test accepts outside a triangle). Slabs end 1e-4 before a cell
+    /// boundary in x; rays from 1.5e3 away (margin 2e-3 to 3e-3) that do not
+    /// move in x pass up to 8e-4 beyond the boundary: they never cross
+    /// the slabs' cells, and only the visit of the neighbours within the
+    /// margin offers those slabs.
+    #[test]
+    fn every_primitive_within_the_margin_is_offered() {
+        let mut rng = crate::core::rng::Sampler::new(99, 0, 0);
+        let mut next = || rng.next_f32();
+        // 998 slabs and two corner specks: bounds the unit cube, 30 cells
+        // per axis (3 * 1000^(1/3)).
+        let n = 1000;
+        let res = 30u32;
+        let boundary = |i: u32| i as f64 / res as f64;
+        let mut boxes: Vec<(Vec3A, Vec3A)> = vec![
+            (Vec3A::ZERO, Vec3A::splat(1e-3)),
+            (Vec3A::splat(1.0 - 1e-3), Vec3A::ONE),
+        ];
+        while boxes.len() < n {
+            let i = 1 + (next() * (res - 1) as f32) as u32 % (res - 1);
+            let x1 = (boundary(i) - 1e-4) as f32;
+            let (y, z) = (next() * 0.8, next() * 0.8);
+            boxes.push((
+                Vec3A::new(x1 - 0.01, y, z),
+                Vec3A::new(x1, y + 0.2, z + 0.2),
+            ));
+        }
+        let grid = Grid::build(&boxes);
+        assert_eq!(grid.resolution(), [res; 3]);
+        let (mut beyond, mut offered_total) = (0, 0);
+        for _ in 0..1000 {
+            let i = 1 + (next() * (res - 1) as f32) as u32 % (res - 1);
+            let x = (boundary(i) + 1e-5 + next() as f64 * 6e-4) as f32;
+            let target = Vec3A::new(x, next(), next());
+            let (dy, dz) = (next() - 0.5, next() - 0.5);
+            let away = Vec3A::new(0.0, dy, dz).normalize_or(Vec3A::Y);
+            let o = target + away * 1.5e3;
+            let ray = Ray::new(o, target - o);
+            assert_eq!(ray.direction.x, 0.0);
+            let (t_min, t_max) = (0.0f32, 2.0f32);
+            let pad = margin(o.abs().max_element(), grid.magnitude) as f64;
+            assert!(pad > 1.9e-3 && pad < 0.1 / res as f64, "{pad}");
+            let mut offered = vec![0u32; boxes.len()];
+            grid.traverse(&ray, t_min, t_max, false, |p, _| {
+                offered[p as usize] += 1;
+                None
+            });
+            let (ro, rd) = (ray.origin.as_dvec3(), ray.direction.as_dvec3());
+            for (p, (a, b)) in boxes.iter().enumerate() {
+                let (a, b) = (a.as_dvec3(), b.as_dvec3());
+                let half = DVec3::splat(0.5 * pad);
+                if meets(ro, rd, t_min as f64, t_max as f64, a - half, b + half) {
+                    assert_eq!(offered[p], 1, "box {p} within the margin of {ray:?}");
+                    // Its cells end before the ray's.
+                    beyond += (b.x < boundary(i) && ro.x > boundary(i)) as u32;
+                }
+                assert!(offered[p] <= 1, "box {p} offered twice");
+            }
+            offered_total += offered.iter().sum::<u32>();
+        }
+        // Slabs in cells the ray never enters, within the margin, occur.
+        assert!(beyond > 50, "{beyond} slabs beyond a cell boundary");
+        assert!(offered_total > 1000);
+    }
+}

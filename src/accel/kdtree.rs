@@ -176,6 +176,14 @@ fn better(a: Split, b: Option<Split>) -> bool {
     }
 }
 
+/// Nodes of at least this many triangles, at depth below
+/// [`PARALLEL_DEPTH`], build their two subtrees in parallel.
+pub const PARALLEL_MIN: usize = 4096;
+
+/// Depth down to which subtrees are built in parallel: up to 2^6 = 64
+/// tasks, each with its own per-triangle scratch.
+pub const PARALLEL_DEPTH: u32 = 6;
+
 struct Builder<'a> {
     tris: &'a [[DVec3; 3]],
     nodes: Vec<KdNode>,
@@ -184,6 +192,8 @@ struct Builder<'a> {
     depth: u32,
     /// Per triangle: 1 left, 2 right, 3 both (scratch of the partition).
     side: Vec<u8>,
+    /// Smallest node whose subtrees are built in parallel.
+    parallel_min: usize,
 }
 
 impl Builder<'_> {
@@ -325,9 +335,42 @@ impl Builder<'_> {
         litems.extend(new_left);
         ritems.extend(new_right);
         let (me, lhi, rlo) = self.push_split(lo, hi, axis, p);
-        self.build(litems, lev, lo, lhi, depth + 1);
-        self.nodes[me].index = self.nodes.len() as u32;
-        self.build(ritems, rev, rlo, hi, depth + 1);
+        if n >= self.parallel_min && depth < PARALLEL_DEPTH {
+            // The right subtree in a builder of its own, spliced in after
+            // the left one: the same nodes, in the same order, as the
+            // sequential build.
+            let mut right = Builder {
+                tris: self.tris,
+                nodes: Vec::new(),
+                prims: Vec::new(),
+                max_depth: self.max_depth,
+                depth: 0,
+                side: vec![0; self.tris.len()],
+                parallel_min: self.parallel_min,
+            };
+            rayon::join(
+                || self.build(litems, lev, lo, lhi, depth + 1),
+                || right.build(ritems, rev, rlo, hi, depth + 1),
+            );
+            self.splice(me, right);
+        } else {
+            self.build(litems, lev, lo, lhi, depth + 1);
+            self.nodes[me].index = self.nodes.len() as u32;
+            self.build(ritems, rev, rlo, hi, depth + 1);
+        }
+    }
+
+    /// Appends the subtree `right` built on its own as the right child of
+    /// node `me`, renumbering its node and triangle references.
+    fn splice(&mut self, me: usize, right: Builder) {
+        let (base, first) = (self.nodes.len() as u32, self.prims.len() as u32);
+        self.nodes[me].index = base;
+        self.nodes.extend(right.nodes.into_iter().map(|mut n| {
+            n.index += if n.is_leaf() { first } else { base };
+            n
+        }));
+        self.prims.extend(right.prims);
+        self.depth = self.depth.max(right.depth);
     }
 
     /// Pushes an inner node splitting `lo..hi` at `p` on `axis` (its right
@@ -480,12 +523,21 @@ impl KdTree {
     }
 
     /// Builds over `triangles` (index = triangle number) in O(N log N).
+    /// The two subtrees of large nodes near the root ([`PARALLEL_MIN`]
+    /// triangles, depth below [`PARALLEL_DEPTH`]) are built in parallel on
+    /// rayon's threads; the tree is the same whatever the thread count.
     pub fn build(triangles: &[[Vec3A; 3]]) -> Self {
         Self::build_with_max_depth(triangles, max_depth(triangles.len()))
     }
 
     /// [`Self::build`] with another depth limit than [`max_depth`].
     pub fn build_with_max_depth(triangles: &[[Vec3A; 3]], limit: u32) -> Self {
+        Self::build_with(triangles, limit, PARALLEL_MIN)
+    }
+
+    /// The build with subtrees of nodes of `parallel_min` triangles or more
+    /// built in parallel (`usize::MAX`: none).
+    fn build_with(triangles: &[[Vec3A; 3]], limit: u32, parallel_min: usize) -> Self {
         if triangles.is_empty() {
             return Self::default();
         }
@@ -498,6 +550,7 @@ impl KdTree {
             max_depth: limit,
             depth: 0,
             side: vec![0; tris.len()],
+            parallel_min,
         };
         b.build(items, events, lo, hi, 0);
         Self::finish(b, lo, hi, magnitude)
@@ -518,6 +571,7 @@ impl KdTree {
             max_depth: max_depth(tris.len()),
             depth: 0,
             side: vec![0; tris.len()],
+            parallel_min: usize::MAX,
         };
         b.build_naive(items, lo, hi, 0);
         Self::finish(b, lo, hi, magnitude)
@@ -755,6 +809,36 @@ mod tests {
             }
         }
         assert!(clipped > 200, "only {clipped} clips kept anything");
+    }
+
+    /// Subtrees built in parallel and spliced give the sequential tree:
+    /// the same nodes (child and leaf references renumbered), leaves and
+    /// depth, on one thread or two, forking at every node of 16 or more
+    /// triangles down to PARALLEL_DEPTH.
+    #[test]
+    fn parallel_build_equals_sequential_build() {
+        for (seed, n) in [(6, 300), (7, 3000)] {
+            let tris = soup(n, seed, 1.0, 0.1);
+            let limit = max_depth(n);
+            let sequential = KdTree::build_with(&tris, limit, usize::MAX);
+            for threads in [1, 2] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let parallel = pool.install(|| KdTree::build_with(&tris, limit, 16));
+                assert_eq!(
+                    parallel.nodes, sequential.nodes,
+                    "seed {seed}, {threads} threads"
+                );
+                assert_eq!(parallel.prims, sequential.prims);
+                assert_eq!(parallel.depth, sequential.depth);
+            }
+            assert!(sequential.depth > PARALLEL_DEPTH, "{}", sequential.depth);
+        }
+        // The default threshold on a small input is the sequential build.
+        let tris = soup(300, 6, 1.0, 0.1);
+        assert_eq!(KdTree::build(&tris).nodes, KdTree::build_naive(&tris).nodes);
     }
 
     /// The sweep build gives the tree of the counting build: same nodes,

@@ -8,6 +8,7 @@ pub mod error;
 pub mod math;
 pub mod microfacet;
 pub mod optics;
+pub mod photon_settings;
 pub mod rng;
 pub mod sampling;
 pub mod settings;

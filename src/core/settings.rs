@@ -48,6 +48,8 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// Photon mapping's parameters (used by [`Transport::Photon`] only).
+    pub photon: crate::core::photon_settings::PhotonSettings,
     /// A panoramic camera instead of the perspective one (`None`): every
     /// direction around the eye, see [`Panorama`].
     pub panorama: Option<Panorama>,
@@ -293,6 +295,10 @@ pub enum Transport {
     /// multiple importance sampling: emissive surfaces are area lights,
     /// diffuse surfaces scatter light onwards.
     Path,
+    /// Progressive photon mapping: photons traced from the lights into a
+    /// caustic and a global map each iteration, read by the camera side
+    /// at diffuse and glossy surfaces (see [`crate::transport::photon`]).
+    Photon,
 }
 
 impl Transport {
@@ -301,6 +307,7 @@ impl Transport {
         match self {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
+            Transport::Photon => "photon",
         }
     }
 }
@@ -365,6 +372,7 @@ impl Default for RenderSettings {
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
             panorama: None,
+            photon: Default::default(),
         }
     }
 }
@@ -461,6 +469,15 @@ impl RenderSettings {
                     "feature lines are drawn for the perspective camera; they do not combine \
                      with the {} panorama",
                     p.name()
+                ));
+            }
+        }
+        if self.transport == Transport::Photon {
+            self.photon.validate()?;
+            if self.spp as u64 * self.photon.iterations as u64 > MAX_SPP as u64 {
+                return Err(format!(
+                    "photon iterations times samples per pixel ({} x {}) exceeds the maximum of {MAX_SPP} samples per pixel",
+                    self.photon.iterations, self.spp
                 ));
             }
         }

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 
@@ -77,6 +77,10 @@ pub struct Mesh {
     positions: Vec<Vec3A>,
     normals: Option<Vec<Vec3A>>,
     uvs: Option<Vec<Vec2>>,
+    /// Optional vertex tangents for normal maps: `xyz` the unit tangent
+    /// (direction of increasing `u`), `w` = ±1 the handedness of the
+    /// bitangent `w * cross(normal, tangent)` (glTF's `TANGENT`).
+    tangents: Option<Vec<Vec4>>,
     /// Vertex indices, in BVH order.
     triangles: Vec<[u32; 3]>,
     /// Vertex positions per triangle, in BVH order.
@@ -117,6 +121,9 @@ pub struct MeshSurface {
     pub shading_normal: Vec3A,
     /// Texture coordinates (zero when the mesh has none).
     pub uv: Vec2,
+    /// Interpolated tangent (`xyz`, unnormalised) and handedness (`w`),
+    /// when the mesh has tangents ([`Mesh::with_tangents`]).
+    pub tangent: Option<Vec4>,
 }
 
 impl Mesh {
@@ -269,6 +276,7 @@ impl Mesh {
             positions,
             normals,
             uvs: data.uvs,
+            tangents: None,
             triangles,
             corners,
             bvh,
@@ -680,12 +688,95 @@ impl Mesh {
             Some(uvs) => uvs[i0] * b0 + uvs[i1] * hit.b1 + uvs[i2] * hit.b2,
             None => Vec2::ZERO,
         };
+        let tangent = self.tangents.as_ref().map(|ts| {
+            let t = ts[i0] * b0 + ts[i1] * hit.b1 + ts[i2] * hit.b2;
+            t.truncate().extend(ts[i0].w)
+        });
         MeshSurface {
             point: p0 + (p1 - p0) * hit.b1 + (p2 - p0) * hit.b2,
             geometric_normal,
             shading_normal,
             uv,
+            tangent,
         }
+    }
+
+    /// Adds vertex tangents for normal mapping: `given` (glTF `TANGENT`,
+    /// one per vertex, checked: finite, `w` = ±1) or, when `None`, tangents
+    /// generated from the texture coordinates: per triangle the direction
+    /// of increasing `u` and the handedness of increasing `v`
+    /// (`w = 1` when `cross(normal, tangent)` points towards decreasing
+    /// `v`, glTF's "+Y up" normal maps with `v` growing downwards), summed
+    /// over the triangles of each vertex weighted by their area, then made
+    /// orthogonal to the vertex normal (Gram-Schmidt). This follows the
+    /// construction MikkTSpace refines; it agrees with it on meshes whose
+    /// texture mapping is smooth across triangles. A mesh without texture
+    /// coordinates gets no tangents (normal maps cannot apply).
+    pub fn with_tangents(mut self, given: Option<Vec<Vec4>>) -> Result<Self, String> {
+        let n = self.positions.len();
+        if let Some(ts) = given {
+            if ts.len() != n {
+                return Err(format!("{} tangents for {n} vertices", ts.len()));
+            }
+            if let Some(i) = ts.iter().position(|t| !t.is_finite()) {
+                return Err(format!("vertex {i} has a non-finite tangent"));
+            }
+            self.tangents = Some(
+                ts.into_iter()
+                    .map(|t| {
+                        let w = if t.w < 0.0 { -1.0 } else { 1.0 };
+                        t.truncate().normalize_or_zero().extend(w)
+                    })
+                    .collect(),
+            );
+            return Ok(self);
+        }
+        let Some(uvs) = &self.uvs else {
+            return Ok(self);
+        };
+        let mut tan = vec![Vec3A::ZERO; n];
+        let mut bit = vec![Vec3A::ZERO; n];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| i as usize);
+            let (e1, e2) = (
+                self.positions[b] - self.positions[a],
+                self.positions[c] - self.positions[a],
+            );
+            let (d1, d2) = (uvs[b] - uvs[a], uvs[c] - uvs[a]);
+            let det = d1.x * d2.y - d2.x * d1.y;
+            if det == 0.0 || !det.is_finite() {
+                continue;
+            }
+            // dP/du and dP/dv times det; weighting by |det| (the uv area)
+            // over the uv area's own scale leaves an area weight.
+            let area = e1.cross(e2).length();
+            let r = area / det.abs() * det.signum();
+            let dpdu = (e1 * d2.y - e2 * d1.y) * r;
+            let dpdv = (e2 * d1.x - e1 * d2.x) * r;
+            for i in [a, b, c] {
+                tan[i] += dpdu;
+                bit[i] += dpdv;
+            }
+        }
+        let normals = self
+            .normals
+            .clone()
+            .unwrap_or_else(|| vertex_normals(&self.positions, &self.triangles));
+        self.tangents = Some(
+            (0..n)
+                .map(|i| {
+                    let nrm = normals[i];
+                    let t = (tan[i] - nrm * nrm.dot(tan[i])).normalize_or_zero();
+                    let w = if nrm.cross(t).dot(bit[i]) > 0.0 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
+                    Vec3::from(t).extend(w)
+                })
+                .collect(),
+        );
+        Ok(self)
     }
 
     /// Positions of all vertices (object space).
@@ -816,5 +907,89 @@ mod tests {
             }
         }
         assert!(hits > 50, "only {hits} of the rays hit the soup");
+    }
+}
+
+#[cfg(test)]
+mod tangent_tests {
+    use super::*;
+
+    /// A unit quad in the XY plane facing +Z with `uv(corner)` mapping.
+    fn quad(uv: impl Fn(Vec2) -> Vec2) -> Mesh {
+        let corners = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.0, 1.0),
+        ];
+        let data = MeshData {
+            positions: corners.iter().map(|c| c.extend(0.0)).collect(),
+            normals: Some(vec![Vec3::Z; 4]),
+            uvs: Some(corners.iter().map(|&c| uv(c)).collect()),
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        };
+        Mesh::new("quad", data, NormalMode::Smooth, BuildQuality::Fastest).unwrap()
+    }
+
+    /// glTF's texture space has `v` growing downwards: with `u` along +X
+    /// and `v` along -Y (an image laid on the quad upright) the tangent is
+    /// +X and `w = 1` (bitangent `cross(Z, X) = +Y`, "up" in the image);
+    /// mirrored `u` flips the tangent; `v` along +Y (an image upside down)
+    /// flips the handedness.
+    #[test]
+    fn generated_tangents_follow_the_texture() {
+        for (map, tangent, w) in [
+            (
+                Box::new(|c: Vec2| Vec2::new(c.x, 1.0 - c.y)) as Box<dyn Fn(Vec2) -> Vec2>,
+                Vec3::X,
+                1.0,
+            ),
+            (
+                Box::new(|c: Vec2| Vec2::new(1.0 - c.x, 1.0 - c.y)),
+                Vec3::NEG_X,
+                -1.0,
+            ),
+            (Box::new(|c: Vec2| Vec2::new(c.x, c.y)), Vec3::X, -1.0),
+            (Box::new(|c: Vec2| Vec2::new(c.y, c.x)), Vec3::Y, 1.0),
+        ] {
+            let mesh = quad(map).with_tangents(None).unwrap();
+            let s = mesh.surface(&MeshHit {
+                t: 1.0,
+                triangle: 0,
+                b1: 0.3,
+                b2: 0.2,
+            });
+            let t = s.tangent.unwrap();
+            assert!((t.truncate().normalize() - tangent).length() < 1e-6, "{t}");
+            assert_eq!(t.w, w, "{t}");
+        }
+    }
+
+    /// Tangents from the file are kept (normalised, `w` as its sign) and
+    /// checked; a mesh without texture coordinates gets none.
+    #[test]
+    fn given_tangents_are_checked() {
+        let mesh = quad(|c| c)
+            .with_tangents(Some(vec![Vec4::new(0.0, 2.0, 0.0, -1.0); 4]))
+            .unwrap();
+        let s = mesh.surface(&MeshHit {
+            t: 1.0,
+            triangle: 1,
+            b1: 0.5,
+            b2: 0.25,
+        });
+        assert_eq!(s.tangent, Some(Vec4::new(0.0, 1.0, 0.0, -1.0)));
+        let e = quad(|c| c)
+            .with_tangents(Some(vec![Vec4::ONE; 3]))
+            .unwrap_err();
+        assert!(e.contains("3 tangents for 4 vertices"), "{e}");
+        let e = quad(|c| c)
+            .with_tangents(Some(vec![Vec4::NAN; 4]))
+            .unwrap_err();
+        assert!(e.contains("non-finite tangent"), "{e}");
+        let mut data = quad(|c| c).input_data();
+        data.uvs = None;
+        let bare = Mesh::new("bare", data, NormalMode::Flat, BuildQuality::Fastest).unwrap();
+        assert!(bare.with_tangents(None).unwrap().tangents.is_none());
     }
 }

@@ -60,11 +60,44 @@ impl ExactSum {
         } else {
             fraction | 0x80_0000
         };
+        // v = mantissa * 2^(max(exponent, 1) - 150) = mantissa units << p.
+        self.add_units(mantissa, exponent.max(1) - 1, bits >> 31 != 0);
+    }
+
+    /// Adds a finite `f64` that is a whole number of `2^-149` units (as
+    /// every exact sum of `f32` values below `2^148` is), exactly.
+    fn add_f64(&mut self, v: f64) {
+        let bits = v.to_bits();
+        let exponent = ((bits >> 52) & 0x7ff) as i32;
+        let fraction = bits & 0xf_ffff_ffff_ffff;
+        let mantissa = if exponent == 0 {
+            fraction
+        } else {
+            fraction | 1 << 52
+        };
         if mantissa == 0 {
             return;
         }
-        // v = mantissa * 2^(max(exponent, 1) - 150) = mantissa units << p.
-        let p = exponent.max(1) - 1;
+        // v = mantissa * 2^(max(exponent, 1) - 1075) = mantissa units << p,
+        // p = max(exponent, 1) - 926; a negative p drops only zero bits.
+        let p = exponent.max(1) - 926;
+        debug_assert!(p >= 0 || mantissa.trailing_zeros() >= p.unsigned_abs());
+        let (mantissa, p) = if p < 0 {
+            (mantissa >> p.unsigned_abs(), 0)
+        } else {
+            (mantissa, p as u32)
+        };
+        self.add_units(mantissa, p, bits >> 63 != 0);
+    }
+
+    /// Adds (or subtracts, when `negative`) `mantissa << p` units, where
+    /// `mantissa < 2^53` and `p <= 253`: the shifted value lands on two
+    /// adjacent words, with the carry (or borrow) rippling up.
+    #[inline]
+    fn add_units(&mut self, mantissa: u64, p: u32, negative: bool) {
+        if mantissa == 0 {
+            return;
+        }
         let (i, shift) = ((p / 64) as usize, p % 64);
         let low = mantissa << shift;
         let high = if shift == 0 {
@@ -74,7 +107,7 @@ impl ExactSum {
         };
         let w = &mut self.0;
         // p <= 253, so i <= 3 and the two words exist.
-        if bits >> 31 == 0 {
+        if !negative {
             let (a, c0) = w[i].overflowing_add(low);
             let (b, c1) = w[i + 1].overflowing_add(high);
             let (b, c2) = b.overflowing_add(c0 as u64);
@@ -160,29 +193,69 @@ impl ExactSum {
     }
 }
 
-/// One pixel's sum over its finite samples, exact: each channel is an
-/// [`ExactSum`], so the sum does not depend on the order in which samples
-/// are added nor on how they are split into partial sums
-/// ([`PixelSum::merge`]). That is what makes a render split across
-/// threads, batches, progressive frames, image regions or sample ranges
-/// bit for bit the render done at once: every path ends in the same
-/// [`PixelSum::mean`] of the same exact sum.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// One pixel's sum over its finite samples, exact: the sum does not
+/// depend on the order in which samples are added nor on how they are
+/// split into partial sums ([`PixelSum::merge`]). That is what makes a
+/// render split across threads, batches, progressive frames, image regions
+/// or sample ranges bit for bit the render done at once: every path ends in
+/// the same [`PixelSum::mean`] of the same exact sum.
+///
+/// Each channel's sum is held as `spill + fast`: `fast` is an `f64` to
+/// which samples are added as long as the `f64` addition is exact (it
+/// almost always is: an `f64` holds 29 more bits than an `f32` sample, so
+/// only a sample below `2^-29` of the running sum, or a sum spanning more
+/// than 53 bits, rounds), and `spill` an [`ExactSum`] that takes the `f64`
+/// sum over, exactly, whenever an addition would round. The spill is
+/// allocated only then, so a pixel normally costs 40 bytes and three
+/// checked `f64` additions per sample, not a 320-bit addition per channel.
+/// The mean is computed from the exact value alone ([`ExactSum::to_f64`]
+/// is exact for every value an `f64` holds), so it is the same whichever
+/// part holds the sum.
+#[derive(Clone, Debug, Default)]
 pub struct PixelSum {
-    sum: [ExactSum; 3],
+    fast: [f64; 3],
+    spill: Option<Box<[ExactSum; 3]>>,
     valid: u32,
 }
+
+/// `a + b` in `f64`, and whether that addition was exact. With
+/// `s = a + b` rounded, `s - a` is exact when `|a| >= |b|` (and `s - b`
+/// when `|b| >= |a|`), so both differences give back the other operand
+/// exactly if and only if no rounding happened.
+#[inline]
+fn exact_add(a: f64, b: f64) -> (f64, bool) {
+    let s = a + b;
+    (s, (s - a == b) & (s - b == a))
+}
+
+impl PartialEq for PixelSum {
+    /// Equal when the exact sums and the counts are equal, whichever part
+    /// holds them.
+    fn eq(&self, other: &Self) -> bool {
+        self.valid == other.valid && self.sums() == other.sums()
+    }
+}
+
+impl Eq for PixelSum {}
 
 impl PixelSum {
     /// A sum from its parts: the three channel sums and the number of
     /// samples added (as stored in sample shards).
     pub fn from_parts(sum: [ExactSum; 3], valid: u32) -> Self {
-        Self { sum, valid }
+        Self {
+            fast: [0.0; 3],
+            spill: Some(Box::new(sum)),
+            valid,
+        }
     }
 
     /// The three channel sums.
     pub fn sums(&self) -> [ExactSum; 3] {
-        self.sum
+        let mut sums = self.spill.as_deref().copied().unwrap_or_default();
+        for (s, &f) in sums.iter_mut().zip(&self.fast) {
+            s.add_f64(f);
+        }
+        sums
     }
 
     /// The number of finite samples added.
@@ -198,11 +271,30 @@ impl PixelSum {
         if !sample.is_finite() {
             return false;
         }
-        self.sum[0].add(sample.x);
-        self.sum[1].add(sample.y);
-        self.sum[2].add(sample.z);
+        let v = [sample.x as f64, sample.y as f64, sample.z as f64];
+        // Three checks, one branch.
+        let (r, r_exact) = exact_add(self.fast[0], v[0]);
+        let (g, g_exact) = exact_add(self.fast[1], v[1]);
+        let (b, b_exact) = exact_add(self.fast[2], v[2]);
+        if r_exact & g_exact & b_exact {
+            self.fast = [r, g, b];
+        } else {
+            self.spill_and_add(v);
+        }
         self.valid += 1;
         true
+    }
+
+    /// The rare case of [`PixelSum::add`]: an `f64` addition would round,
+    /// so the `f64` sums move into the exact spill (exactly) and the sample
+    /// starts them afresh.
+    #[cold]
+    fn spill_and_add(&mut self, v: [f64; 3]) {
+        let spill = self.spill.get_or_insert_with(Default::default);
+        for ((s, f), v) in spill.iter_mut().zip(&mut self.fast).zip(v) {
+            s.add_f64(*f);
+            *f = v;
+        }
     }
 
     /// Adds another partial sum of the same pixel (disjoint samples):
@@ -210,14 +302,27 @@ impl PixelSum {
     /// `None` on overflow, which sums of at most
     /// [`MAX_SPP`](crate::core::settings::MAX_SPP) samples never reach.
     pub fn merge(&self, other: &PixelSum) -> Option<PixelSum> {
-        Some(PixelSum {
-            sum: [
-                self.sum[0].checked_add(&other.sum[0])?,
-                self.sum[1].checked_add(&other.sum[1])?,
-                self.sum[2].checked_add(&other.sum[2])?,
+        let valid = self.valid.checked_add(other.valid)?;
+        if self.spill.is_none() && other.spill.is_none() {
+            let f = |c: usize| exact_add(self.fast[c], other.fast[c]);
+            let ((r, r_exact), (g, g_exact), (b, b_exact)) = (f(0), f(1), f(2));
+            if r_exact & g_exact & b_exact {
+                return Some(PixelSum {
+                    fast: [r, g, b],
+                    spill: None,
+                    valid,
+                });
+            }
+        }
+        let (a, b) = (self.sums(), other.sums());
+        Some(PixelSum::from_parts(
+            [
+                a[0].checked_add(&b[0])?,
+                a[1].checked_add(&b[1])?,
+                a[2].checked_add(&b[2])?,
             ],
-            valid: self.valid.checked_add(other.valid)?,
-        })
+            valid,
+        ))
     }
 
     /// The mean of the samples added, black when there are none: each
@@ -229,11 +334,15 @@ impl PixelSum {
             return Color::ZERO;
         }
         let n = self.valid as f64;
-        let channel = |s: ExactSum| (s.to_f64() / n) as f32;
+        let total = match &self.spill {
+            // The f64 sums are exact: they are what `to_f64` would give.
+            None => self.fast,
+            Some(_) => self.sums().map(|s| s.to_f64()),
+        };
         Color::new(
-            channel(self.sum[0]),
-            channel(self.sum[1]),
-            channel(self.sum[2]),
+            (total[0] / n) as f32,
+            (total[1] / n) as f32,
+            (total[2] / n) as f32,
         )
     }
 }
@@ -393,8 +502,8 @@ mod tests {
             let (mut a, mut b) = (PixelSum::default(), PixelSum::default());
             samples[..cut].iter().for_each(|s| _ = a.add(*s));
             samples[cut..].iter().for_each(|s| _ = b.add(*s));
-            assert_eq!(a.merge(&b), Some(forward));
-            assert_eq!(b.merge(&a), Some(forward));
+            assert_eq!(a.merge(&b).as_ref(), Some(&forward));
+            assert_eq!(b.merge(&a).as_ref(), Some(&forward));
         }
         // The mean is the exact mean to within the roundings to f64 and f32.
 
@@ -403,6 +512,104 @@ mod tests {
         assert!(
             (m - exact).abs() <= exact * 2f64.powi(-23),
             "{m} vs {exact}"
+        );
+    }
+
+    /// The mean as the 320-bit sums alone give it (the reference for
+    /// [`PixelSum`]'s `f64` fast path): every channel through
+    /// [`ExactSum::add`] and [`ExactSum::to_f64`].
+    fn reference_mean(samples: &[Color]) -> Color {
+        let mut sums = [ExactSum::default(); 3];
+        for s in samples {
+            for (c, v) in sums.iter_mut().zip(s.to_array()) {
+                c.add(v);
+            }
+        }
+        let n = samples.len() as f64;
+        Color::from_array(sums.map(|s| (s.to_f64() / n) as f32))
+    }
+
+    #[test]
+    fn the_f64_fast_path_gives_the_exact_sums_bits_in_any_order_and_split() {
+        // Three regimes: samples of one magnitude (no spill), samples over
+        // 80 binary orders with signs (spills in every order), and sums
+        // that stay exact until one tiny sample arrives.
+        let mut r = Sampler::new(21, 4, 5);
+        let mut sets: Vec<Vec<Color>> = Vec::new();
+        sets.push(
+            (0..4096)
+                .map(|_| Color::new(r.next_f32(), r.next_f32(), r.next_f32()))
+                .collect(),
+        );
+        sets.push(
+            (0..4096)
+                .map(|_| {
+                    let e = (r.next_f32() * 80.0) as i32 - 40;
+                    let sign = if r.next_f32() < 0.3 { -1.0 } else { 1.0 };
+                    Color::new(r.next_f32(), sign, r.next_f32()) * 2f32.powi(e)
+                })
+                .collect(),
+        );
+        let mut late = vec![Color::splat(0.75); 100];
+        late.push(Color::new(1.0e-12, 3.0e-20, 0.1));
+        late.extend(vec![Color::splat(1.5); 100]);
+        sets.push(late);
+        for samples in &sets {
+            let want = reference_mean(samples);
+            let mut forward = PixelSum::default();
+            samples.iter().for_each(|s| _ = forward.add(*s));
+            assert_eq!(
+                forward.mean().to_array().map(f32::to_bits),
+                want.to_array().map(f32::to_bits)
+            );
+            let mut exact = [ExactSum::default(); 3];
+            for s in samples {
+                for (c, v) in exact.iter_mut().zip(s.to_array()) {
+                    c.add(v);
+                }
+            }
+            assert_eq!(forward.sums(), exact);
+            // Shuffled orders, and splits merged either way round.
+            for round in 0..4u32 {
+                let mut order: Vec<usize> = (0..samples.len()).collect();
+                let mut q = Sampler::new(99, round, 0);
+                for i in (1..order.len()).rev() {
+                    let j = ((q.next_f32() * (i + 1) as f32) as usize).min(i);
+                    order.swap(i, j);
+                }
+                let cut = order.len() * (round as usize + 1) / 5;
+                let (mut a, mut b, mut all) = (
+                    PixelSum::default(),
+                    PixelSum::default(),
+                    PixelSum::default(),
+                );
+                for (k, &i) in order.iter().enumerate() {
+                    all.add(samples[i]);
+                    if k < cut {
+                        a.add(samples[i])
+                    } else {
+                        b.add(samples[i])
+                    };
+                }
+                for sum in [all, a.merge(&b).unwrap(), b.merge(&a).unwrap()] {
+                    assert_eq!(sum, forward);
+                    assert_eq!(
+                        sum.mean().to_array().map(f32::to_bits),
+                        want.to_array().map(f32::to_bits)
+                    );
+                }
+            }
+        }
+        // The three regimes really are what they claim: the first never
+        // leaves the fast path, the other two spill.
+        let spills = |samples: &[Color]| {
+            let mut p = PixelSum::default();
+            samples.iter().for_each(|s| _ = p.add(*s));
+            p.spill.is_some()
+        };
+        assert_eq!(
+            sets.iter().map(|s| spills(s)).collect::<Vec<_>>(),
+            [false, true, true]
         );
     }
 

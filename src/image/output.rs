@@ -117,21 +117,37 @@ pub fn write_image_with_lines(
     lines: Option<&LineOverlay>,
     opts: &PngOptions,
 ) -> Result<()> {
-    if let Some(l) = lines
-        && (l.width, l.height) != (film.width, film.height)
-    {
-        return Err(Error::Output {
-            path: path.to_path_buf(),
-            message: format!(
-                "line overlay is {}x{} but the image is {}x{}",
-                l.width, l.height, film.width, film.height
-            ),
-        });
+    write_image_with_overlays(path, film, lines.as_slice(), opts)
+}
+
+/// [`write_image_with_lines`] with any number of line masks, mixed in
+/// one after the other (later ones over earlier ones). Each must have the
+/// film's size.
+pub fn write_image_with_overlays(
+    path: &Path,
+    film: &Film,
+    overlays: &[&LineOverlay],
+    opts: &PngOptions,
+) -> Result<()> {
+    for l in overlays {
+        if (l.width, l.height) != (film.width, film.height) {
+            return Err(Error::Output {
+                path: path.to_path_buf(),
+                message: format!(
+                    "line overlay is {}x{} but the image is {}x{}",
+                    l.width, l.height, film.width, film.height
+                ),
+            });
+        }
     }
     let linear;
-    let film = match (lines, OutputFormat::from_path(path)) {
-        (Some(l), Ok(OutputFormat::Exr)) => {
-            linear = l.over_linear(film);
+    let film = match OutputFormat::from_path(path) {
+        Ok(OutputFormat::Exr) if !overlays.is_empty() => {
+            let mut f = film.clone();
+            for l in overlays {
+                f = l.over_linear(&f);
+            }
+            linear = f;
             &linear
         }
         _ => film,
@@ -150,11 +166,9 @@ pub fn write_image_with_lines(
                 .iter()
                 .enumerate()
                 .flat_map(|(i, &c)| {
-                    let rgb = to_srgb8(c, opts);
-                    match lines {
-                        Some(l) => l.over_srgb8(i, rgb),
-                        None => rgb,
-                    }
+                    overlays
+                        .iter()
+                        .fold(to_srgb8(c, opts), |rgb, l| l.over_srgb8(i, rgb))
                 })
                 .collect();
             image::codecs::png::PngEncoder::new(&mut w)

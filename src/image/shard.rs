@@ -207,11 +207,12 @@ pub fn write_shard(path: &Path, shard: &Shard) -> Result<()> {
                 "count",
                 FlatSamples::U32(sums.iter().map(|s| s.count()).collect()),
             ));
+            let exact: Vec<[ExactSum; 3]> = sums.iter().map(PixelSum::sums).collect();
             for (c, name) in SUM_CHANNELS.iter().enumerate() {
                 for word in 0..2 * SUM_WORDS {
-                    let values = sums
+                    let values = exact
                         .iter()
-                        .map(|s| (s.sums()[c].0[word / 2] >> (32 * (word % 2))) as u32)
+                        .map(|s| (s[c].0[word / 2] >> (32 * (word % 2))) as u32)
                         .collect();
                     channels.push(AnyChannel::new(
                         format!("sum.{name}.{word}").as_str(),

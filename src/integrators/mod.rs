@@ -3,6 +3,8 @@
 
 pub mod counters;
 pub mod lines;
+pub mod overlay;
+pub mod photon;
 pub mod progressive;
 pub mod recursive;
 pub mod vector_lines;
@@ -10,7 +12,7 @@ pub mod wavefront;
 
 use glam::Vec2;
 
-use crate::core::math::Color;
+use crate::core::math::{Color, Ray};
 use crate::core::rng::Sampler;
 use crate::core::settings::RenderSettings;
 use crate::image::film::PixelSum;
@@ -30,6 +32,22 @@ pub fn film_sample(x: u32, y: u32, spp: u32, sampler: &mut Sampler) -> Vec2 {
     } else {
         Vec2::new(x as f32 + sampler.next_f32(), y as f32 + sampler.next_f32())
     }
+}
+
+/// The camera ray of sample `s` of pixel `(x, y)`: through its film
+/// position ([`film_sample`], dimensions 0 and 1) and, for a camera with a
+/// lens, from the lens point of dimensions 2 and 3 (the spare pair of the
+/// first set of four, see [`crate::transport::path::bounce_dimension`]).
+/// A pinhole camera's ray is the one it always was.
+#[inline]
+pub fn camera_ray(cam: &CameraRays, x: u32, y: u32, spp: u32, sampler: &mut Sampler) -> Ray {
+    let p = film_sample(x, y, spp, sampler);
+    if !cam.has_lens() {
+        return cam.ray(p);
+    }
+    sampler.set_dimension(2);
+    let u = Vec2::new(sampler.next_f32(), sampler.next_f32());
+    cam.lens_ray(p, u)
 }
 
 /// Adds one sample to a pixel's sum, counting it in `counters` when it is

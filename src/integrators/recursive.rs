@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::{Progress, accumulate, camera_rays, film_sample};
+use super::{Progress, accumulate, camera_ray, camera_rays};
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
@@ -111,6 +111,7 @@ pub fn trace_path(
 /// Radiance of sample `s` of the `spp` samples of pixel `(x, y)`: its
 /// camera ray, traced with the settings' transport. Its random numbers
 /// are keyed by (seed, pixel, sample).
+#[inline]
 pub fn pixel_sample(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -121,15 +122,20 @@ pub fn pixel_sample(
 ) -> Color {
     let pixel = y * settings.width + x;
     let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
-    let ray = cam.ray(film_sample(x, y, spp, &mut sampler));
+    let ray = camera_ray(cam, x, y, spp, &mut sampler);
     counters.rays.camera += 1;
     match settings.transport {
         Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
-        Transport::Path => trace_path(scene, settings, &ray, &mut sampler, counters),
+        // A lone sample has no photon maps: photon transport renders through
+        // `integrators::photon`; here it falls back to path tracing.
+        Transport::Path | Transport::Photon => {
+            trace_path(scene, settings, &ray, &mut sampler, counters)
+        }
     }
 }
 
 /// The exact sum of the window's samples of pixel `(x, y)`.
+#[inline(always)]
 fn pixel_sum(
     scene: &RenderScene,
     settings: &RenderSettings,

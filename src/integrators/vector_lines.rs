@@ -14,11 +14,16 @@
 //!   edge's own faces are met only at the point itself). Points are tested
 //!   every half pixel of the projected edge, and each change of visibility
 //!   is located by bisection to 1/64 pixel.
-//! * **Projection and clipping**: edges are cut at a near plane just in
-//!   front of the eye, projected with [`CameraProjection`] (a straight edge
-//!   projects to a straight segment, and points along it are found by
-//!   perspective-correct interpolation) and clipped to the image with
-//!   [`clip_segment`].
+//! * **Projection and clipping**: edges are clipped against the view
+//!   volume in homogeneous coordinates before the perspective divide
+//!   ([`CameraProjection::to_clip`], [`clip_line_homogeneous`]), so nothing
+//!   behind the eye is projected and only the piece inside the image is
+//!   worked on; a straight edge projects to a straight segment, and points
+//!   along it are found by perspective-correct interpolation.
+//!
+//! The same machinery draws the structure overlays
+//! ([`crate::integrators::overlay`]): any list of [`WorldEdge`]s goes
+//! through [`project_edges`] and [`to_svg`].
 //!
 //! Analytic shapes (spheres, quadrics, ...) have no edges and are not in the
 //! vector output; they still hide the edges behind them.
@@ -29,7 +34,7 @@ use std::fmt::Write as _;
 use glam::{Vec2, Vec3A};
 use rayon::prelude::*;
 
-use crate::core::clip::clip_segment;
+use crate::core::clip::clip_line_homogeneous;
 use crate::core::math::Ray;
 use crate::integrators::Progress;
 use crate::integrators::lines::crease_cosine_degrees;
@@ -37,7 +42,8 @@ use crate::scene::RenderScene;
 use crate::scene::camera::{CameraProjection, CameraRays};
 use crate::scene::instance::InstanceGeometry;
 
-/// What makes an edge a line.
+/// What makes an edge a line: a feature line of a mesh, or an edge the
+/// structure overlays draw.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum EdgeKind {
     /// Between a face turned towards the eye and one turned away.
@@ -47,6 +53,16 @@ pub enum EdgeKind {
     /// An edge of only one face (the border of an open mesh), or of more
     /// than two.
     Border,
+    /// A triangle edge (the wireframe overlay).
+    Triangle,
+    /// An edge of a mesh's bounding box (the structure overlays).
+    Bounds,
+    /// An edge of a BVH node's box.
+    Box,
+    /// An edge of a grid cell that holds triangles.
+    Cell,
+    /// An edge of a kd-tree splitting plane (its rectangle in the node's box).
+    Plane,
 }
 
 impl EdgeKind {
@@ -56,11 +72,16 @@ impl EdgeKind {
             EdgeKind::Silhouette => "silhouette",
             EdgeKind::Crease => "crease",
             EdgeKind::Border => "border",
+            EdgeKind::Triangle => "triangle",
+            EdgeKind::Bounds => "bounds",
+            EdgeKind::Box => "box",
+            EdgeKind::Cell => "cell",
+            EdgeKind::Plane => "plane",
         }
     }
 }
 
-/// A line edge of a mesh in the scene's frame (world coordinates minus
+/// A line edge in the scene's frame (world coordinates minus
 /// [`RenderScene::origin`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WorldEdge {
@@ -113,17 +134,9 @@ pub const VISIBILITY_MARGIN: f32 = 1.0 - 1e-4;
 /// Length in pixels below which a visible or hidden piece is left out.
 pub const MIN_PIECE: f32 = 1.0 / 32.0;
 
-/// The line edges of a triangle mesh for an eye at `eye`: `positions` and
-/// `triangles` in world space, `cos_crease` the cosine of the crease angle
-/// (below it two faces make a crease; pass less than -1 for none). Returns
-/// `(a, b, kind)` per edge, in a fixed order.
-pub fn mesh_edges(
-    positions: &[Vec3A],
-    triangles: &[[u32; 3]],
-    eye: Vec3A,
-    cos_crease: f32,
-) -> Vec<(Vec3A, Vec3A, EdgeKind)> {
-    // Weld vertices by exact position.
+/// Vertices welded by exact position (`-0.0` and `0.0` alike): the id of
+/// each vertex's position, and one vertex per id.
+pub fn weld(positions: &[Vec3A]) -> (Vec<u32>, Vec<Vec3A>) {
     let mut weld: HashMap<[u32; 3], u32> = HashMap::new();
     let mut welded = Vec::with_capacity(positions.len());
     let mut reps: Vec<Vec3A> = Vec::new();
@@ -135,6 +148,20 @@ pub fn mesh_edges(
         });
         welded.push(id);
     }
+    (welded, reps)
+}
+
+/// The line edges of a triangle mesh for an eye at `eye`: `positions` and
+/// `triangles` in world space, `cos_crease` the cosine of the crease angle
+/// (below it two faces make a crease; pass less than -1 for none). Returns
+/// `(a, b, kind)` per edge, in a fixed order.
+pub fn mesh_edges(
+    positions: &[Vec3A],
+    triangles: &[[u32; 3]],
+    eye: Vec3A,
+    cos_crease: f32,
+) -> Vec<(Vec3A, Vec3A, EdgeKind)> {
+    let (welded, reps) = weld(positions);
     // Faces of each edge, in triangle order.
     let mut edges: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
     let mut order: Vec<(u32, u32)> = Vec::new();
@@ -228,43 +255,31 @@ fn edge_segments(
     rays: &mut u64,
 ) {
     let eye = proj.origin();
-    let (mut a, mut b) = (edge.a, edge.b);
-    let (_, za) = proj.project(a);
-    let (_, zb) = proj.project(b);
-    // Cut at a near plane just in front of the eye.
-    let near = 1e-5 * (a - eye).length().max((b - eye).length()).max(1e-6);
-    if za < near && zb < near {
-        return;
-    }
-    if za < near {
-        a = a + (b - a) * ((near - za) / (zb - za));
-    } else if zb < near {
-        b = b + (a - b) * ((near - zb) / (za - zb));
-    }
-    let (fa, za) = proj.project(a);
-    let (fb, zb) = proj.project(b);
-    let Some((c0, c1)) = clip_segment(fa, fb, Vec2::ZERO, size) else {
+    // Clip against the view volume in homogeneous coordinates, before any
+    // divide: nothing behind the eye is projected, and what remains is the
+    // piece inside the image. Clip coordinates are linear in the world
+    // point, so the parameters are those of the world edge too.
+    let (ca, cb) = (proj.to_clip(edge.a, size), proj.to_clip(edge.b, size));
+    let Some((t0, t1, c0, c1)) = clip_line_homogeneous(ca, cb) else {
         return;
     };
+    let (ea, eb) = (edge.a.as_dvec3(), edge.b.as_dvec3());
+    let a = (ea + (eb - ea) * t0).as_vec3a();
+    let b = (ea + (eb - ea) * t1).as_vec3a();
+    let (fa, fb) = (
+        CameraProjection::clip_to_film(c0, size),
+        CameraProjection::clip_to_film(c1, size),
+    );
+    let (za, zb) = (c0.w as f32, c1.w as f32);
+    let (s0, s1) = (0.0f32, 1.0f32);
     // World point whose projection is at film parameter `s` of `fa..fb`
     // (perspective correct: 1/depth is linear on the film).
-    let at_full = |s: f32| {
-        let u = (s / zb) / ((1.0 - s) / za + s / zb);
-        a + (b - a) * u
-    };
-    // Continue with the piece inside the image only: an edge cut at the
-    // near plane can project millions of pixels long, and parameters and
-    // film positions along it would keep the precision of that length
-    // (pieces pixels off, bisection that never reaches 1/64 pixel).
-    let (a, b) = (at_full(c0), at_full(c1));
-    let (fa, za) = proj.project(a);
-    let (fb, zb) = proj.project(b);
-    let (s0, s1) = (0.0f32, 1.0f32);
     let at = |s: f32| {
         let u = (s / zb) / ((1.0 - s) / za + s / zb);
         a + (b - a) * u
     };
-    let film = |s: f32| fa + (fb - fa) * s;
+    // Kept inside the image against the rounding of the interpolation.
+    let film = |s: f32| (fa + (fb - fa) * s).clamp(Vec2::ZERO, size);
     let length = (fb - fa).length() * (s1 - s0);
     let steps = ((length * 2.0).ceil() as usize).clamp(1, 1 << 14);
     let mut runs: Vec<(f32, bool)> = Vec::new(); // (start parameter, visible)
@@ -324,13 +339,28 @@ fn edge_segments(
 pub fn vector_lines(
     scene: &RenderScene,
     camera: &CameraRays,
-    (width, height): (u32, u32),
+    size: (u32, u32),
     crease_degrees: f32,
     progress: Option<Progress<'_>>,
 ) -> VectorLines {
-    let proj = camera.projection();
     let cos_crease = crease_cosine_degrees(crease_degrees);
-    let edges = scene_edges(scene, proj.origin(), cos_crease);
+    let edges = scene_edges(scene, camera.origin(), cos_crease);
+    project_edges(scene, camera, size, &edges, progress)
+}
+
+/// Any world `edges` (in the scene's frame) seen through `camera` on a
+/// `width` x `height` image: clipped to the view, projected and split
+/// where their visibility changes, by ray casting against `scene`.
+/// Segments come in edge order, whatever the thread count. `progress` is
+/// called with the number of edges finished.
+pub fn project_edges(
+    scene: &RenderScene,
+    camera: &CameraRays,
+    (width, height): (u32, u32),
+    edges: &[WorldEdge],
+    progress: Option<Progress<'_>>,
+) -> VectorLines {
+    let proj = camera.projection();
     let size = Vec2::new(width as f32, height as f32);
     let parts: Vec<(Vec<Segment2>, u64)> = edges
         .par_chunks(256)

@@ -87,6 +87,8 @@ pub struct SettingsDesc {
     /// The light-field capture rig (`[lightfield]`), for `prism lightfield
     /// capture`; not part of [`SettingsDesc::resolve`].
     pub lightfield: Option<crate::core::settings::LightFieldSettings>,
+    /// Photon mapping's parameters, each optional.
+    pub photon: crate::core::photon_settings::PhotonOverrides,
 }
 
 impl SettingsDesc {
@@ -119,6 +121,7 @@ impl SettingsDesc {
             lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
             panorama: self.panorama.or(under.panorama).unwrap_or(d.panorama),
+            photon: self.photon.or(under.photon).resolve(),
         }
     }
 }
@@ -143,6 +146,83 @@ pub struct SceneDesc {
 }
 
 impl SceneDesc {
+    /// The world-space box around every bounded object (analytic shapes
+    /// and meshes through their transforms; infinite planes are left out),
+    /// or `None` when there is no bounded object.
+    pub fn world_bounds(&self) -> Option<(glam::DVec3, glam::DVec3)> {
+        use glam::DVec3;
+        let mut lo = DVec3::INFINITY;
+        let mut hi = DVec3::NEG_INFINITY;
+        for o in &self.objects {
+            let b = match &o.geometry {
+                Geometry::Shape(s) => s.bounds(),
+                Geometry::Mesh(m) => m.bounds(),
+            };
+            let Some((a, b)) = b else { continue };
+            for i in 0..8 {
+                let c = glam::Vec3A::select(
+                    glam::BVec3A::new(i & 1 != 0, i & 2 != 0, i & 4 != 0),
+                    b,
+                    a,
+                );
+                let w = o.transform.0.transform_point3(c.as_dvec3());
+                if w.is_finite() {
+                    lo = lo.min(w);
+                    hi = hi.max(w);
+                }
+            }
+        }
+        (lo.cmple(hi).all()).then_some((lo, hi))
+    }
+
+    /// True when the scene is lit under `transport`: it has a punctual
+    /// light, or (path transport only, where emissive surfaces are area
+    /// lights) an emissive surface.
+    pub fn is_lit(&self, transport: crate::core::settings::Transport) -> bool {
+        !self.lights.is_empty()
+            || (transport == crate::core::settings::Transport::Path
+                && self
+                    .objects
+                    .iter()
+                    .any(|o| o.material.emission.max_element() > 0.0))
+    }
+
+    /// Gives a scene without a camera one, the way glTF viewers show a
+    /// bare model: [`frame_bounds`](crate::scene::camera::frame_bounds) of
+    /// [`SceneDesc::world_bounds`] (a unit box at the origin when nothing is
+    /// bounded) for an image of aspect ratio `aspect`. Returns a notice for
+    /// standard error when it added one.
+    pub fn ensure_camera(&mut self, aspect: f64) -> Option<String> {
+        if !self.cameras.is_empty() {
+            return None;
+        }
+        let (lo, hi) = self
+            .world_bounds()
+            .unwrap_or((glam::DVec3::splat(-0.5), glam::DVec3::splat(0.5)));
+        self.cameras
+            .push(crate::scene::camera::frame_bounds(lo, hi, aspect));
+        Some(format!(
+            "the scene has no camera; framing its bounds from +Z ({} degree vertical field of view)",
+            crate::scene::camera::AUTO_VFOV_DEGREES
+        ))
+    }
+
+    /// Gives a scene that is not lit under `transport`
+    /// ([`SceneDesc::is_lit`]) the lights of [`default_lights`] for
+    /// `camera`. Returns a notice for standard error when it added them.
+    pub fn ensure_light(
+        &mut self,
+        camera: &Camera,
+        transport: crate::core::settings::Transport,
+    ) -> Option<String> {
+        if self.is_lit(transport) {
+            return None;
+        }
+        let (lights, what) = default_lights(camera);
+        self.lights.extend(lights);
+        Some(format!("the scene has no light; adding {what}"))
+    }
+
     /// Appends another scene's objects, lights and cameras (used when a
     /// scene file includes a glTF file).
     pub fn append(&mut self, other: SceneDesc) {
@@ -150,4 +230,48 @@ impl SceneDesc {
         self.lights.extend(other.lights);
         self.cameras.extend(other.cameras);
     }
+}
+
+/// Illuminance of the default key light, lux: a white Lambertian surface
+/// facing it has radiance `E / pi`, about 1.
+pub const DEFAULT_KEY_LUX: f32 = std::f32::consts::PI;
+
+/// The lights an unlit scene gets ([`SceneDesc::ensure_light`]),
+/// and a few words saying what they are: one directional "key" light of
+/// [`DEFAULT_KEY_LUX`] lux, white, shining from behind the camera's left
+/// shoulder (from the eye's side, rotated 30 degrees up and 30 degrees to
+/// the left of the viewing direction) so that faces turned towards the
+/// camera are lit and shapes read by their shading.
+///
+/// This is the one place that decides the default lighting.
+pub fn default_lights(camera: &Camera) -> (Vec<LightDesc>, String) {
+    use glam::{DMat3, DVec3};
+    let forward = (camera.look_at - camera.look_from).normalize_or(DVec3::NEG_Z);
+    let up_hint = camera.up.as_dvec3();
+    let right = forward.cross(up_hint).normalize_or(DVec3::X);
+    let up = right.cross(forward);
+    let angle = 30f64.to_radians();
+    // Travel direction: the viewing direction turned down and to the right,
+    // so the light comes from above and from the left.
+    let direction = (forward * angle.cos() * angle.cos() - up * angle.sin()
+        + right * angle.cos() * angle.sin())
+    .normalize();
+    // A transform whose local -Z is `direction`.
+    let z = -direction;
+    let x = up.cross(z).normalize_or(DVec3::X);
+    let y = z.cross(x);
+    let rotation = glam::DQuat::from_mat3(&DMat3::from_cols(x, y, z));
+    let light = LightDesc {
+        name: Some("default key light".into()),
+        transform: Transform::from_trs(DVec3::ZERO, rotation, DVec3::ONE),
+        light: Light::Directional {
+            illuminance: Color::splat(DEFAULT_KEY_LUX),
+        },
+    };
+    (
+        vec![light],
+        format!(
+            "a white directional key light of {DEFAULT_KEY_LUX:.2} lux from above the camera's left shoulder"
+        ),
+    )
 }

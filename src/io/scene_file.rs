@@ -93,6 +93,18 @@ struct FileSettings {
     sampler: Option<FileSampler>,
     /// `"perspective"`, `"equirect"` or `"cubemap"`.
     camera_projection: Option<FileProjection>,
+    /// Photon mapping (each optional).
+    photon: Option<FilePhoton>,
+}
+
+#[derive(Deserialize, Clone, Copy, Default)]
+#[serde(deny_unknown_fields)]
+struct FilePhoton {
+    photons: Option<u32>,
+    radius: Option<f32>,
+    alpha: Option<f32>,
+    iterations: Option<u32>,
+    gather_rays: Option<u32>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -139,6 +151,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Photon,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -160,6 +173,14 @@ struct FileCamera {
     /// Lens shift `[right, up]` in image heights.
     #[serde(default)]
     shift: [f32; 2],
+    /// Thin lens: aperture radius in scene units (0: pinhole).
+    aperture_radius: Option<f32>,
+    /// Thin lens: f-number (see `Camera::set_f_number`).
+    f_number: Option<f32>,
+    /// Thin lens: distance of the plane in focus (default: to `look_at`).
+    focus_distance: Option<f32>,
+    /// Orthographic projection: half the height of the view, in scene units.
+    ortho_half_height: Option<f32>,
 }
 
 fn default_up() -> [f32; 3] {
@@ -558,7 +579,20 @@ impl Ctx<'_> {
             l.validate()
                 .map_err(|e| self.err(format!("settings.lines: {e}")))?;
         }
+        let photon = s.photon.unwrap_or_default();
+        let photon = crate::core::photon_settings::PhotonOverrides {
+            photons: photon.photons,
+            radius: photon.radius,
+            alpha: photon.alpha,
+            iterations: photon.iterations,
+            gather_rays: photon.gather_rays,
+        };
+        photon
+            .resolve()
+            .validate()
+            .map_err(|e| self.err(format!("settings.photon: {e}")))?;
         Ok(SettingsDesc {
+            photon,
             width: s.width,
             height: s.height,
             spp: s.spp,
@@ -569,6 +603,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
             rr_start_depth: s.russian_roulette.map(|r| match r {
@@ -604,7 +639,26 @@ impl Ctx<'_> {
             vfov_degrees: c.vfov,
             shift: glam::Vec2::from(c.shift),
             name: None,
+            focus_distance: c.focus_distance.unwrap_or(0.0),
+            ..Default::default()
         };
+        let mut cam = cam;
+        match (c.aperture_radius, c.f_number) {
+            (Some(_), Some(_)) => {
+                return Err("camera: give aperture_radius or f_number, not both".into());
+            }
+            (Some(r), None) => cam.lens_radius = r,
+            (None, Some(n)) => {
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(format!("camera.f_number must be positive, got {n}"));
+                }
+                cam.set_f_number(n);
+            }
+            (None, None) => {}
+        }
+        if let Some(h) = c.ortho_half_height {
+            cam.projection = crate::scene::camera::Projection::Orthographic { half_height: h };
+        }
         cam.validate()?;
         Ok(cam)
     }
@@ -637,12 +691,9 @@ impl Ctx<'_> {
                     .map(|p| Color::new(p[0], p[1], p[2]).map(srgb_to_linear))
                     .collect();
                 Ok(Texture::Image {
-                    image: Arc::new(ImageTexture {
-                        width,
-                        height,
-                        texels,
-                    }),
+                    image: Arc::new(ImageTexture::new(width, height, texels)),
                     transform: UvTransform::default(),
+                    sampler: Default::default(),
                 })
             }
         }

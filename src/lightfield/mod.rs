@@ -90,7 +90,8 @@ impl Rig {
     /// and focal distance of `settings`; the focal distance defaults to
     /// the distance from the camera's eye to the point it looks at, the
     /// spacing to a sixteenth of the focal distance. The camera's
-    /// [`shift`](Camera::shift) is not used.
+    /// [`shift`](Camera::shift), lens and projection are not used: the
+    /// rig's cameras are pinholes.
     pub fn from_camera(camera: &Camera, settings: &LightFieldSettings) -> Result<Self> {
         camera.validate().map_err(Error::Invalid)?;
         settings.validate().map_err(Error::Invalid)?;
@@ -215,7 +216,7 @@ impl Rig {
             up: self.up.as_vec3(),
             vfov_degrees: self.vfov_degrees as f32,
             shift: Vec2::new((-a / scale) as f32, (-b / scale) as f32),
-            name: None,
+            ..Default::default()
         }
     }
 

@@ -28,7 +28,7 @@ use crate::core::error::{Error, Result};
 use crate::core::math::Color;
 use crate::image::film::Film;
 use crate::lightfield::{LightField, Rig};
-use crate::scene::camera::Camera;
+use crate::scene::camera::{Camera, Projection};
 
 /// Interpolation positions this close to a sample (in grid cells or
 /// pixels) are snapped onto it.
@@ -189,6 +189,12 @@ pub fn synthesise(
     options: SynthOptions,
 ) -> Result<Synthesis> {
     camera.validate().map_err(Error::Invalid)?;
+    if camera.projection != Projection::Perspective || camera.lens_radius > 0.0 {
+        return Err(Error::Invalid(
+            "views made from a light field are pinhole perspective views (no lens, not orthographic)"
+                .into(),
+        ));
+    }
     if width == 0 || height == 0 {
         return Err(Error::Invalid(format!(
             "the view is empty ({width}x{height})"

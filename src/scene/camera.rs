@@ -1,14 +1,33 @@
-//! Pinhole camera: rays through an image plane (or, for panoramas, in
-//! every direction: [`crate::scene::panorama`]).
+//! Cameras: pinhole, thin lens (depth of field) and orthographic rays
+//! through an image plane, panoramas in every direction
+//! ([`crate::scene::panorama`]), and the automatic framing of a scene's
+//! bounds.
 
 use bevy_ecs::component::Component;
-use glam::{DVec3, Mat3A, Vec2, Vec3, Vec3A};
+use glam::{DMat3, DVec3, DVec4, Mat3A, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
 use crate::core::settings::Panorama;
 use crate::scene::panorama::PanoramaRays;
 
-/// A pinhole camera looking from `look_from` towards `look_at`.
+/// How a camera projects the world onto its image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    /// Rays from one eye (or from a lens around it) through the image plane,
+    /// with [`Camera::vfov_degrees`] as the vertical field of view.
+    Perspective,
+    /// Parallel rays along the viewing direction from a rectangle around
+    /// the eye, `2 * half_height` world units tall (glTF's `ymag` is the
+    /// half height); the width follows the image's aspect ratio.
+    Orthographic {
+        /// Half the height of the viewed rectangle, in world units.
+        half_height: f32,
+    },
+}
+
+/// A camera looking from `look_from` towards `look_at`: a pinhole by
+/// default, a thin lens when [`Camera::lens_radius`] is positive, or an
+/// orthographic projection.
 ///
 /// Positions are world coordinates in double precision, like
 /// [`Transform`](crate::geometry::transform::Transform): a camera 1e9 units
@@ -21,7 +40,7 @@ pub struct Camera {
     pub look_at: DVec3,
     /// Approximate up direction (need not be orthogonal to the view).
     pub up: Vec3,
-    /// Vertical field of view in degrees.
+    /// Vertical field of view in degrees (perspective projection).
     pub vfov_degrees: f32,
     /// Lens shift: the image window slides in its own plane, right by
     /// `shift.x` and up by `shift.y` image heights, while the eye and the
@@ -30,6 +49,15 @@ pub struct Camera {
     /// usual centred view; light-field cameras use it so that every view
     /// frames the same window of the focal plane.
     pub shift: Vec2,
+    /// Radius of the thin lens's aperture in world units; 0 (the default)
+    /// is a pinhole, whose image is sharp at every depth.
+    pub lens_radius: f32,
+    /// Distance from the eye, along the viewing direction, of the plane
+    /// in focus; 0 (the default) focuses on `look_at`. Only used when
+    /// `lens_radius` is positive.
+    pub focus_distance: f32,
+    /// Perspective (default) or orthographic.
+    pub projection: Projection,
     /// Optional name (from glTF).
     pub name: Option<String>,
 }
@@ -42,6 +70,9 @@ impl Default for Camera {
             up: Vec3::Y,
             vfov_degrees: 40.0,
             shift: Vec2::ZERO,
+            lens_radius: 0.0,
+            focus_distance: 0.0,
+            projection: Projection::Perspective,
             name: None,
         }
     }
@@ -75,7 +106,81 @@ impl Camera {
         if !self.shift.is_finite() {
             return Err(format!("camera shift must be finite, got {}", self.shift));
         }
+        if !(self.lens_radius.is_finite() && self.lens_radius >= 0.0) {
+            return Err(format!(
+                "camera lens radius must be finite and >= 0, got {}",
+                self.lens_radius
+            ));
+        }
+        if !(self.focus_distance.is_finite() && self.focus_distance >= 0.0) {
+            return Err(format!(
+                "camera focus distance must be finite and >= 0 (0: the look_at point), got {}",
+                self.focus_distance
+            ));
+        }
+        if let Projection::Orthographic { half_height } = self.projection
+            && !(half_height.is_finite() && half_height > 0.0)
+        {
+            return Err(format!(
+                "orthographic camera half height must be finite and positive, got {half_height}"
+            ));
+        }
         Ok(())
+    }
+
+    /// The distance of the plane in focus: [`Camera::focus_distance`], or
+    /// the distance to `look_at` when that is 0.
+    pub fn focal_distance(&self) -> f32 {
+        if self.focus_distance > 0.0 {
+            self.focus_distance
+        } else {
+            (self.look_at - self.look_from).length() as f32
+        }
+    }
+
+    /// Sets the aperture from an f-number: the lens radius is
+    /// `focal_length / (2 N)`, with the focal length of a lens that images
+    /// the plane in focus (at [`Camera::focal_distance`]) onto a 36 x 24 mm
+    /// frame (full-frame film) with this camera's vertical field of view,
+    /// and scene units taken as metres. The focal length is
+    /// `0.012 / tan(vfov / 2)` m (an approximation valid when the focus
+    /// is far compared with the focal length).
+    pub fn set_f_number(&mut self, f_number: f32) {
+        let focal_length = 0.012 / (self.vfov_degrees.to_radians() * 0.5).tan();
+        self.lens_radius = focal_length / (2.0 * f_number);
+    }
+}
+
+/// Vertical field of view of the cameras made by [`frame_bounds`], in
+/// degrees.
+pub const AUTO_VFOV_DEGREES: f32 = 40.0;
+
+/// A camera that frames the box `lo..hi` (world coordinates) for an image
+/// of aspect ratio `aspect` (width / height): it looks at the box's centre
+/// along `-Z` (from the `+Z` side, glTF's "front"), with `+Y` up and a
+/// vertical field of view of [`AUTO_VFOV_DEGREES`], from the distance at
+/// which the box's front face fills 90% of the narrower image side (the
+/// box's depth is added so that nothing is behind the eye). A box of zero
+/// size gets the distance of a unit box.
+pub fn frame_bounds(lo: DVec3, hi: DVec3, aspect: f64) -> Camera {
+    let centre = 0.5 * (lo + hi);
+    let half = (0.5 * (hi - lo)).max(DVec3::ZERO);
+    let half = if half.max_element() > 0.0 {
+        half
+    } else {
+        DVec3::splat(0.5)
+    };
+    let tan_v = (AUTO_VFOV_DEGREES as f64 * 0.5).to_radians().tan();
+    let tan_h = tan_v * aspect;
+    let fill = 0.9;
+    let distance = (half.y / (fill * tan_v)).max(half.x / (fill * tan_h)) + half.z;
+    Camera {
+        look_from: centre + DVec3::Z * distance,
+        look_at: centre,
+        up: Vec3::Y,
+        vfov_degrees: AUTO_VFOV_DEGREES,
+        name: Some("automatic framing".into()),
+        ..Camera::default()
     }
 }
 
@@ -91,6 +196,17 @@ pub struct CameraRays {
     dy: Vec3A,
     /// A panorama instead of the image plane (`None`: perspective).
     panorama: Option<PanoramaRays>,
+    /// Unit right and up vectors of the lens plane, scaled by the lens
+    /// radius (zero for a pinhole).
+    lens_u: Vec3A,
+    lens_v: Vec3A,
+    /// Unit viewing direction.
+    forward: Vec3A,
+    /// Distance to the plane in focus along the viewing direction.
+    focus: f32,
+    /// Orthographic: the unit viewing direction (rays are parallel and the
+    /// image plane offsets are added to the origin instead).
+    ortho_forward: Option<Vec3A>,
 }
 
 impl CameraRays {
@@ -110,18 +226,33 @@ impl CameraRays {
         let forward = (camera.look_at - camera.look_from).normalize().as_vec3();
         let right = forward.cross(camera.up).normalize();
         let up = right.cross(forward);
-        let half_h = (camera.vfov_degrees.to_radians() * 0.5).tan();
+        let (half_h, ortho_forward, plane_centre) = match camera.projection {
+            Projection::Perspective => (
+                (camera.vfov_degrees.to_radians() * 0.5).tan(),
+                None,
+                forward,
+            ),
+            Projection::Orthographic { half_height } => {
+                (half_height, Some(Vec3A::from(forward)), Vec3::ZERO)
+            }
+        };
         let half_w = half_h * width as f32 / height as f32;
         // The window's centre, moved by the shift (in image heights).
-        let centre = forward
+        let centre = plane_centre
             + right * (2.0 * half_h * camera.shift.x)
             + up * (2.0 * half_h * camera.shift.y);
         let top_left = centre - right * half_w + up * half_h;
+        let lens = camera.lens_radius;
         Self {
             origin: (camera.look_from - origin).as_vec3a(),
             top_left: top_left.into(),
             dx: (right * (2.0 * half_w / width as f32)).into(),
             dy: (-up * (2.0 * half_h / height as f32)).into(),
+            lens_u: (right * lens).into(),
+            lens_v: (up * lens).into(),
+            forward: forward.into(),
+            focus: camera.focal_distance(),
+            ortho_forward,
             panorama: None,
         }
     }
@@ -160,15 +291,50 @@ impl CameraRays {
     }
 
     /// The ray through film position `p` in pixels (`(0,0)` is the top-left
-    /// corner of the image, `(0.5, 0.5)` the centre of the first pixel).
-    /// The direction is unit length.
+    /// corner of the image, `(0.5, 0.5)` the centre of the first pixel)
+    /// from the centre of the lens (the pinhole ray). The direction is unit
+    /// length.
     #[inline]
     pub fn ray(&self, p: Vec2) -> Ray {
         if let Some(pano) = &self.panorama {
             return Ray::new(self.origin, pano.direction(p));
         }
         let d = self.top_left + self.dx * p.x + self.dy * p.y;
-        Ray::new(self.origin, d.normalize())
+        match self.ortho_forward {
+            None => Ray::new(self.origin, d.normalize()),
+            Some(forward) => Ray::new(self.origin + d, forward),
+        }
+    }
+
+    /// True when the camera has a lens of positive radius (depth of
+    /// field): [`CameraRays::lens_ray`] then depends on its lens sample.
+    #[inline]
+    pub fn has_lens(&self) -> bool {
+        self.lens_u != Vec3A::ZERO
+    }
+
+    /// The ray through film position `p` from lens point `lens` (a uniform
+    /// sample of the unit square, mapped concentrically onto the unit disk
+    /// and scaled by the lens radius): it starts on the lens and passes
+    /// through the point that the pinhole ray [`CameraRays::ray`] meets on
+    /// the plane in focus, so that plane stays sharp. Without a lens this
+    /// is exactly [`CameraRays::ray`].
+    #[inline]
+    pub fn lens_ray(&self, p: Vec2, lens: Vec2) -> Ray {
+        let pinhole = self.ray(p);
+        // Panoramas are pinholes: every direction from one eye.
+        if !self.has_lens() || self.panorama.is_some() {
+            return pinhole;
+        }
+        let disk = crate::core::sampling::concentric_disk(lens);
+        let offset = self.lens_u * disk.x + self.lens_v * disk.y;
+        // Distance along the pinhole ray to the plane in focus, which is
+        // perpendicular to the viewing direction.
+        let cos = pinhole.direction.dot(self.forward);
+        let t = self.focus / cos;
+        let focus_point = pinhole.origin + pinhole.direction * t;
+        let origin = pinhole.origin + offset;
+        Ray::new(origin, (focus_point - origin).normalize())
     }
 
     /// The eye: where every camera ray starts.
@@ -209,5 +375,164 @@ impl CameraProjection {
     /// The eye.
     pub fn origin(&self) -> Vec3A {
         self.origin
+    }
+
+    /// Homogeneous clip coordinates of world point `p` for a film of
+    /// `size` pixels, in double precision: `w` is the depth of
+    /// [`Self::project`], and `x / w`, `y / w` run from -1 to 1 across the
+    /// image (left to right, top to bottom), so the image is the view
+    /// volume `|x|, |y| <= w` of [`crate::core::clip`]. `z` is 0 (depth is
+    /// not clipped). Clip coordinates are linear in `p`: a parameter
+    /// along a clipped segment is the same parameter along the world
+    /// segment.
+    pub fn to_clip(&self, p: Vec3A, size: Vec2) -> DVec4 {
+        let v = DMat3::from_cols(
+            self.to_film.x_axis.as_dvec3(),
+            self.to_film.y_axis.as_dvec3(),
+            self.to_film.z_axis.as_dvec3(),
+        ) * (p.as_dvec3() - self.origin.as_dvec3());
+        DVec4::new(
+            2.0 * v.y / size.x as f64 - v.x,
+            2.0 * v.z / size.y as f64 - v.x,
+            0.0,
+            v.x,
+        )
+    }
+
+    /// Film position in pixels of a point in the view volume of
+    /// [`Self::to_clip`] (`w > 0`, `|x|, |y| <= w`): inside
+    /// `[0, size.x] x [0, size.y]`, boundary included.
+    pub fn clip_to_film(c: DVec4, size: Vec2) -> Vec2 {
+        let f = |v: f64, s: f32| ((v / c.w + 1.0) * 0.5 * s as f64).clamp(0.0, s as f64) as f32;
+        Vec2::new(f(c.x, size.x), f(c.y, size.y))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The automatic camera sees every corner of the box inside the image,
+    /// and the box fills 90% of the image's narrower side (up to the
+    /// perspective of its depth: its front face exactly, the projected box
+    /// a little more).
+    #[test]
+    fn framing_puts_the_box_in_view() {
+        for (lo, hi, aspect) in [
+            (
+                DVec3::new(-1.0, -1.0, -1.0),
+                DVec3::new(1.0, 1.0, 1.0),
+                4.0 / 3.0,
+            ),
+            (
+                DVec3::new(10.0, 0.0, -3.0),
+                DVec3::new(30.0, 2.0, 3.0),
+                4.0 / 3.0,
+            ),
+            (DVec3::new(0.0, -5.0, 0.0), DVec3::new(0.1, 5.0, 0.1), 1.0),
+            (DVec3::new(0.0, 0.0, -50.0), DVec3::new(1.0, 1.0, 50.0), 2.0),
+        ] {
+            let (w, h) = ((240.0 * aspect) as u32, 240);
+            let cam = frame_bounds(lo, hi, w as f64 / h as f64);
+            cam.validate().unwrap();
+            let proj = CameraRays::new(&cam, w, h).projection();
+            let (mut min, mut max) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+            for i in 0..8 {
+                let c = DVec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), hi, lo);
+                let (p, depth) = proj.project(c.as_vec3a());
+                assert!(depth > 0.0, "corner {c} behind the eye");
+                assert!(
+                    p.x >= 0.0 && p.y >= 0.0 && p.x <= w as f32 && p.y <= h as f32,
+                    "corner {c} at {p} outside the {w}x{h} image"
+                );
+                min = min.min(p);
+                max = max.max(p);
+            }
+            let fill = ((max.x - min.x) / w as f32).max((max.y - min.y) / h as f32);
+            assert!(fill >= 0.89, "box {lo}..{hi} fills only {fill}");
+        }
+    }
+
+    /// Every lens ray of a film position meets the plane in focus where
+    /// the pinhole ray does; lens samples spread the ray origins over a
+    /// disk of the lens radius; without a lens the ray is the pinhole's.
+    #[test]
+    fn lens_rays_meet_on_the_plane_in_focus() {
+        let cam = Camera {
+            look_from: DVec3::new(1.0, 2.0, 3.0),
+            look_at: DVec3::new(0.0, 0.0, -4.0),
+            lens_radius: 0.25,
+            focus_distance: 6.0,
+            ..Camera::default()
+        };
+        let rays = CameraRays::new(&cam, 32, 24);
+        let forward = (cam.look_at - cam.look_from).normalize().as_vec3a();
+        for p in [
+            Vec2::new(0.5, 0.5),
+            Vec2::new(16.0, 12.0),
+            Vec2::new(31.5, 3.25),
+        ] {
+            let pin = rays.ray(p);
+            let on_plane = |r: &Ray| {
+                r.at((6.0 - (r.origin - pin.origin).dot(forward)) / r.direction.dot(forward))
+            };
+            let target = on_plane(&pin);
+            for u in [
+                Vec2::new(0.1, 0.9),
+                Vec2::new(0.5, 0.5),
+                Vec2::new(0.99, 0.01),
+            ] {
+                let r = rays.lens_ray(p, u);
+                assert!((r.direction.length() - 1.0).abs() < 1e-5);
+                assert!((r.origin - pin.origin).length() <= 0.25 + 1e-5);
+                assert!((r.origin - pin.origin).dot(forward).abs() < 1e-5);
+                let hit = on_plane(&r);
+                assert!((hit - target).length() < 1e-4, "{hit} vs {target}");
+            }
+        }
+        let pinhole = CameraRays::new(
+            &Camera {
+                lens_radius: 0.0,
+                ..cam
+            },
+            32,
+            24,
+        );
+        let p = Vec2::new(3.0, 4.0);
+        assert_eq!(pinhole.lens_ray(p, Vec2::new(0.3, 0.7)), pinhole.ray(p));
+    }
+
+    /// Orthographic rays are parallel to the viewing direction and start on
+    /// a rectangle of the given half height around the eye.
+    #[test]
+    fn orthographic_rays_are_parallel() {
+        let cam = Camera {
+            look_from: DVec3::new(0.0, 0.0, 10.0),
+            projection: Projection::Orthographic { half_height: 2.0 },
+            ..Camera::default()
+        };
+        let rays = CameraRays::new(&cam, 40, 20);
+        let top_left = rays.ray(Vec2::ZERO);
+        let bottom_right = rays.ray(Vec2::new(40.0, 20.0));
+        assert_eq!(top_left.direction, Vec3A::NEG_Z);
+        assert_eq!(bottom_right.direction, Vec3A::NEG_Z);
+        assert!((top_left.origin - Vec3A::new(-4.0, 2.0, 10.0)).length() < 1e-5);
+        assert!((bottom_right.origin - Vec3A::new(4.0, -2.0, 10.0)).length() < 1e-5);
+    }
+
+    /// The f-number gives radius f / 2N with the focal length of a
+    /// 24 mm-tall frame: 50 mm at a vertical field of view of 27 degrees.
+    #[test]
+    fn f_number_sets_the_lens_radius() {
+        let mut cam = Camera {
+            vfov_degrees: 2.0 * (12.0f32 / 50.0).atan().to_degrees(),
+            ..Camera::default()
+        };
+        cam.set_f_number(2.0);
+        assert!(
+            (cam.lens_radius - 0.0125).abs() < 1e-6,
+            "{}",
+            cam.lens_radius
+        );
     }
 }

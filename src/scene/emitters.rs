@@ -83,6 +83,9 @@ pub struct EmitterTable {
     cdf: Vec<f32>,
     /// Per instance, how to evaluate light densities on it.
     density: Vec<InstanceDensity>,
+    /// Sum over entries of area times emission weight (the selection
+    /// weights' total).
+    weighted_area: f32,
 }
 
 /// Luminance of the emission factor used to weight an emitter.
@@ -232,7 +235,16 @@ impl EmitterTable {
             entries,
             cdf,
             density,
+            weighted_area: total as f32,
         }
+    }
+
+    /// Sum over the entries of their world area times the luminance of
+    /// their material's emission factor: the emitted power per unit
+    /// radiance-steradian, so that `2 pi` times it is the total power of
+    /// the table's (two-sided, untextured) emitters in luminance.
+    pub fn weighted_area(&self) -> f32 {
+        self.weighted_area
     }
 
     /// True when there is nothing to sample.

@@ -15,8 +15,7 @@ use glam::{Vec2, Vec3};
 use crate::core::math::Color;
 use crate::core::microfacet::{GltfBrdf, MIN_ALPHA};
 
-/// An RGB(A) image texture in linear space, sampled bilinearly with
-/// repeat wrapping.
+/// An RGB(A) image texture in linear space.
 #[derive(Debug)]
 pub struct ImageTexture {
     /// Width in texels.
@@ -25,32 +24,142 @@ pub struct ImageTexture {
     pub height: u32,
     /// Row-major linear RGB texels.
     pub texels: Vec<Vec3>,
+    /// Row-major alpha (coverage) of each texel, or empty when the image
+    /// has no alpha channel (opaque).
+    pub alpha: Vec<f32>,
+}
+
+/// How texture coordinates outside `[0, 1]` are mapped (glTF sampler
+/// `wrapS` / `wrapT`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Wrap {
+    /// The image repeats (the default).
+    #[default]
+    Repeat,
+    /// The image repeats, mirrored every other time.
+    MirroredRepeat,
+    /// Coordinates are clamped to the edge texels.
+    ClampToEdge,
+}
+
+impl Wrap {
+    /// The texel index for integer coordinate `i` of an axis of `n` texels.
+    #[inline]
+    fn index(self, i: i64, n: i64) -> usize {
+        (match self {
+            Wrap::Repeat => i.rem_euclid(n),
+            Wrap::MirroredRepeat => {
+                let m = i.rem_euclid(2 * n);
+                if m < n { m } else { 2 * n - 1 - m }
+            }
+            Wrap::ClampToEdge => i.clamp(0, n - 1),
+        }) as usize
+    }
+}
+
+/// How an image texture is read between texels (glTF sampler filters).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureSampler {
+    /// Wrapping of `u`.
+    pub wrap_u: Wrap,
+    /// Wrapping of `v`.
+    pub wrap_v: Wrap,
+    /// Bilinear interpolation (true, the default) or the nearest texel.
+    pub linear: bool,
+}
+
+impl Default for TextureSampler {
+    fn default() -> Self {
+        Self {
+            wrap_u: Wrap::Repeat,
+            wrap_v: Wrap::Repeat,
+            linear: true,
+        }
+    }
 }
 
 impl ImageTexture {
+    /// An opaque texture of `width` x `height` row-major texels.
+    pub fn new(width: u32, height: u32, texels: Vec<Vec3>) -> Self {
+        Self {
+            width,
+            height,
+            texels,
+            alpha: Vec::new(),
+        }
+    }
+
     /// Bilinear lookup with repeat wrapping; `uv` (0,0) is the top-left corner.
     pub fn sample(&self, uv: Vec2) -> Vec3 {
+        self.sample_with(uv, TextureSampler::default())
+    }
+
+    /// The texels of a lookup at `uv` with `sampler`: the four texel
+    /// indices of the bilinear footprint (top-left, top-right, bottom-left,
+    /// bottom-right; all four the same texel for nearest filtering) and
+    /// the fractions `(fx, fy)` between them; `None` when the image is
+    /// empty or the texel coordinates are not finite.
+    #[inline]
+    fn taps(&self, uv: Vec2, sampler: TextureSampler) -> Option<([usize; 4], f32, f32)> {
         if self.width == 0 || self.height == 0 {
-            return Vec3::ONE;
+            return None;
+        }
+        let (w, h) = (self.width as i64, self.height as i64);
+        let at = |xi: i64, yi: i64| {
+            sampler.wrap_v.index(yi, h) * self.width as usize + sampler.wrap_u.index(xi, w)
+        };
+        if !sampler.linear {
+            let x = uv.x * self.width as f32;
+            let y = uv.y * self.height as f32;
+            if !x.is_finite() || !y.is_finite() {
+                return None;
+            }
+            let i = at(x.floor() as i64, y.floor() as i64);
+            return Some(([i; 4], 0.0, 0.0));
         }
         let x = uv.x * self.width as f32 - 0.5;
         let y = uv.y * self.height as f32 - 0.5;
         if !x.is_finite() || !y.is_finite() {
-            return self.texels[0];
+            return None;
         }
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
-        let w = self.width as i64;
-        let h = self.height as i64;
-        let at = |xi: i64, yi: i64| {
-            let xi = xi.rem_euclid(w) as usize;
-            let yi = yi.rem_euclid(h) as usize;
-            self.texels[yi * self.width as usize + xi]
-        };
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
-        let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+        Some((
+            [
+                at(x0, y0),
+                at(x0 + 1, y0),
+                at(x0, y0 + 1),
+                at(x0 + 1, y0 + 1),
+            ],
+            fx,
+            fy,
+        ))
+    }
+
+    /// Lookup with `sampler`'s wrapping and filter; `uv` (0,0) is the
+    /// top-left corner. Non-finite coordinates read the first texel.
+    pub fn sample_with(&self, uv: Vec2, sampler: TextureSampler) -> Vec3 {
+        let Some(([a, b, c, d], fx, fy)) = self.taps(uv, sampler) else {
+            return self.texels.first().copied().unwrap_or(Vec3::ONE);
+        };
+        let t = &self.texels;
+        let top = t[a].lerp(t[b], fx);
+        let bottom = t[c].lerp(t[d], fx);
         top.lerp(bottom, fy)
+    }
+
+    /// Alpha at `uv` with `sampler` (1 for an image without alpha).
+    pub fn alpha_with(&self, uv: Vec2, sampler: TextureSampler) -> f32 {
+        let al = &self.alpha;
+        if al.is_empty() {
+            return 1.0;
+        }
+        let Some(([a, b, c, d], fx, fy)) = self.taps(uv, sampler) else {
+            return al[0];
+        };
+        let lerp = |p: f32, q: f32, f: f32| p + (q - p) * f;
+        lerp(lerp(al[a], al[b], fx), lerp(al[c], al[d], fx), fy)
     }
 }
 
@@ -93,6 +202,8 @@ pub enum Texture {
         image: Arc<ImageTexture>,
         /// Transform of the texture coordinates before lookup.
         transform: UvTransform,
+        /// Wrapping and filtering.
+        sampler: TextureSampler,
     },
     /// A checkerboard of squares `1/scale` wide in texture space.
     Checker {
@@ -109,7 +220,11 @@ impl Texture {
     /// Colour at texture coordinate `uv`.
     pub fn sample(&self, uv: Vec2) -> Color {
         match self {
-            Texture::Image { image, transform } => image.sample(transform.apply(uv)),
+            Texture::Image {
+                image,
+                transform,
+                sampler,
+            } => image.sample_with(transform.apply(uv), *sampler),
             Texture::Checker { scale, even, odd } => {
                 let p = (uv * *scale).floor();
                 if (p.x as i64 + p.y as i64).rem_euclid(2) == 0 {
@@ -119,6 +234,100 @@ impl Texture {
                 }
             }
         }
+    }
+}
+
+impl Texture {
+    /// Alpha (coverage) at `uv`: the image's alpha channel, 1 for images
+    /// without one and for procedural textures.
+    pub fn alpha(&self, uv: Vec2) -> f32 {
+        match self {
+            Texture::Image {
+                image,
+                transform,
+                sampler,
+            } => image.alpha_with(transform.apply(uv), *sampler),
+            Texture::Checker { .. } => 1.0,
+        }
+    }
+}
+
+/// How a surface's alpha (coverage) is used (glTF `alphaMode`; `OPAQUE`
+/// is the absence of an [`Alpha`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlphaMode {
+    /// Cut-out: where alpha is below `cutoff` the surface does not exist,
+    /// for every ray (camera, shadow and scattered rays alike).
+    Mask {
+        /// Alpha below which the surface is cut away (glTF default 0.5).
+        cutoff: f32,
+    },
+    /// Transparency: a ray passes through the surface with probability
+    /// `1 - alpha` (stochastic transparency, decided by a hash of the ray
+    /// and the hit, so it is the same for the same ray whatever the
+    /// thread; averaged over a pixel's samples it blends the surface with
+    /// what is behind it).
+    Blend,
+}
+
+/// A surface's coverage: `factor` times the alpha channel of `texture`
+/// (glTF's base colour factor and texture alpha), used as `mode` says.
+#[derive(Clone, Debug)]
+pub struct Alpha {
+    /// Cut-out or transparency.
+    pub mode: AlphaMode,
+    /// Constant alpha factor.
+    pub factor: f32,
+    /// Texture whose alpha channel scales `factor`.
+    pub texture: Option<Texture>,
+}
+
+impl Alpha {
+    /// Coverage at texture coordinate `uv`.
+    #[inline]
+    pub fn coverage(&self, uv: Vec2) -> f32 {
+        match &self.texture {
+            Some(t) => self.factor * t.alpha(uv),
+            None => self.factor,
+        }
+    }
+
+    /// True when a ray passes through the surface at `uv`; `u` is the ray's
+    /// uniform number in `[0, 1)` for stochastic transparency (see
+    /// [`AlphaMode::Blend`]).
+    #[inline]
+    pub fn passes(&self, uv: Vec2, u: f32) -> bool {
+        let a = self.coverage(uv);
+        match self.mode {
+            AlphaMode::Mask { cutoff } => !(a >= cutoff),
+            AlphaMode::Blend => !(u < a),
+        }
+    }
+}
+
+/// A tangent-space normal map (glTF `normalTexture`): texel `(r, g, b)` is
+/// the vector `(2r-1, 2g-1, 2b-1)` in the frame (tangent, bitangent,
+/// normal), with `x` and `y` multiplied by `scale`. The bitangent is
+/// `w * cross(normal, tangent)` from the mesh's tangents
+/// ([`Mesh::with_tangents`](crate::geometry::mesh::Mesh::with_tangents)):
+/// glTF's convention, green pointing "up" in the image, towards
+/// decreasing `v`.
+#[derive(Clone, Debug)]
+pub struct NormalMap {
+    /// The map (linear, not sRGB).
+    pub texture: Texture,
+    /// glTF `normalTexture.scale`.
+    pub scale: f32,
+}
+
+impl NormalMap {
+    /// The unit tangent-space normal at `uv` (a zero texel vector gives
+    /// `(0, 0, 1)`, the unmapped normal).
+    #[inline]
+    pub fn normal(&self, uv: Vec2) -> Vec3 {
+        let t = self.texture.sample(uv) * 2.0 - Vec3::ONE;
+        let n = Vec3::new(t.x * self.scale, t.y * self.scale, t.z);
+        n.try_normalize().unwrap_or(Vec3::Z)
     }
 }
 
@@ -159,6 +368,12 @@ pub struct Material {
     /// when present the surface is re-derived per hit, see
     /// [`Material::from_metallic_roughness`].
     pub metallic_roughness: Option<MetallicRoughness>,
+    /// Coverage (glTF `alphaMode` MASK or BLEND); `None`: opaque. Read by
+    /// intersection queries, which skip the surface where it is cut away.
+    pub alpha: Option<Alpha>,
+    /// Tangent-space normal map; applied to the shading normal of meshes
+    /// (which provide the tangents) when their hits are completed.
+    pub normal_map: Option<NormalMap>,
 }
 
 /// The glTF parameters kept for per-hit evaluation of a textured
@@ -194,6 +409,8 @@ impl Default for Material {
             emission: Color::ZERO,
             emission_texture: None,
             metallic_roughness: None,
+            alpha: None,
+            normal_map: None,
         }
     }
 }
@@ -441,4 +658,118 @@ fn gltf_brdf(
         dielectric_f90: w,
         diffuse: base * dielectric_weight,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 3x1 image with texels 0, 1, 2 (red channel) and alpha 0, 0.5, 1.
+    fn strip() -> ImageTexture {
+        ImageTexture {
+            alpha: vec![0.0, 0.5, 1.0],
+            ..ImageTexture::new(3, 1, (0..3).map(|i| Vec3::splat(i as f32)).collect())
+        }
+    }
+
+    /// Texel indices of each wrap mode, worked by hand for a 3-texel axis.
+    #[test]
+    fn wrap_modes_index_texels() {
+        let idx = |w: Wrap| (-4..7).map(|i| w.index(i, 3)).collect::<Vec<_>>();
+        assert_eq!(idx(Wrap::Repeat), [2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0]);
+        assert_eq!(idx(Wrap::MirroredRepeat), [2, 2, 1, 0, 0, 1, 2, 2, 1, 0, 0]);
+        assert_eq!(idx(Wrap::ClampToEdge), [0, 0, 0, 0, 0, 1, 2, 2, 2, 2, 2]);
+    }
+
+    /// Nearest filtering reads one texel; linear interpolates between
+    /// texel centres; clamping holds the edge texel beyond the image,
+    /// where repeat wraps around to the other side.
+    #[test]
+    fn samplers_filter_and_wrap() {
+        let t = strip();
+        let nearest = TextureSampler {
+            linear: false,
+            ..Default::default()
+        };
+        let clamp = TextureSampler {
+            wrap_u: Wrap::ClampToEdge,
+            ..Default::default()
+        };
+        let at = |u: f32, s: TextureSampler| t.sample_with(Vec2::new(u, 0.5), s).x;
+        assert_eq!(at(0.5, nearest), 1.0);
+        assert_eq!(at(0.6, nearest), 1.0);
+        assert_eq!(at(0.7, nearest), 2.0);
+        // Between the centres of texels 1 and 2 (u = 1/2 and 5/6).
+        assert!((at(2.0 / 3.0, TextureSampler::default()) - 1.5).abs() < 1e-6);
+        // Beyond the right edge: clamp stays at 2, repeat blends to 0.
+        assert_eq!(at(0.99, clamp), 2.0);
+        assert!(at(0.99, TextureSampler::default()) < 2.0);
+        assert!((t.alpha_with(Vec2::new(2.0 / 3.0, 0.5), Default::default()) - 0.75).abs() < 1e-6);
+        // The default sampler is the lookup textures always had.
+        for u in [0.1f32, 0.37, 0.5, 0.93] {
+            assert_eq!(
+                t.sample(Vec2::new(u, 0.2)),
+                t.sample_with(Vec2::new(u, 0.2), Default::default())
+            );
+        }
+    }
+
+    /// MASK keeps the surface where alpha reaches the cutoff; BLEND lets a
+    /// ray through with probability 1 - alpha.
+    #[test]
+    fn alpha_modes_decide_coverage() {
+        let texture = Texture::Image {
+            image: Arc::new(strip()),
+            transform: UvTransform::default(),
+            sampler: TextureSampler {
+                linear: false,
+                ..Default::default()
+            },
+        };
+        let mask = Alpha {
+            mode: AlphaMode::Mask { cutoff: 0.5 },
+            factor: 1.0,
+            texture: Some(texture.clone()),
+        };
+        let uv = |u: f32| Vec2::new(u, 0.5);
+        assert!(mask.passes(uv(0.1), 0.0));
+        assert!(!mask.passes(uv(0.5), 0.0));
+        assert!(!mask.passes(uv(0.9), 0.99));
+        let blend = Alpha {
+            mode: AlphaMode::Blend,
+            factor: 0.8,
+            texture: Some(texture),
+        };
+        // alpha = 0.8 * 0.5 = 0.4 in the middle texel.
+        assert!(!blend.passes(uv(0.5), 0.39));
+        assert!(blend.passes(uv(0.5), 0.41));
+        assert!(blend.passes(uv(0.1), 0.0));
+    }
+
+    /// A flat normal-map texel (0.5, 0.5, 1) is the unmapped normal; the
+    /// scale tilts x and y only.
+    #[test]
+    fn normal_map_texels_decode() {
+        let tex = |c: Vec3| Texture::Image {
+            image: Arc::new(ImageTexture::new(1, 1, vec![c])),
+            transform: UvTransform::default(),
+            sampler: TextureSampler::default(),
+        };
+        let flat = NormalMap {
+            texture: tex(Vec3::new(0.5, 0.5, 1.0)),
+            scale: 1.0,
+        };
+        assert!((flat.normal(Vec2::ZERO) - Vec3::Z).length() < 1e-6);
+        // Texel (1, 0.5, 1) is the tangent-space vector (1, 0, 1); a
+        // scale of 2 makes it (2, 0, 1).
+        let tilted = NormalMap {
+            texture: tex(Vec3::new(1.0, 0.5, 1.0)),
+            scale: 2.0,
+        };
+        let n = tilted.normal(Vec2::ZERO);
+        assert!(
+            (n - Vec3::new(2.0, 0.0, 1.0).normalize()).length() < 1e-6,
+            "{n}"
+        );
+    }
 }

@@ -2,6 +2,8 @@
 //! for single rays, packets of eight and streams, and the brute-force
 //! reference.
 
+use glam::Vec3A;
+
 use crate::accel::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
 use crate::accel::single::traverse_bvh;
 use crate::core::math::Ray;
@@ -49,7 +51,9 @@ impl RenderScene {
     }
 
     /// Closest hit on one instance; meshes by their BVH, or by testing
-    /// every triangle when `brute_force` is set.
+    /// every triangle when `brute_force` is set. Hits where the instance's
+    /// material is cut away ([`Material::alpha`](crate::scene::material::Material::alpha))
+    /// are skipped: the search goes on beyond them.
     #[inline(always)]
     fn intersect_instance_with<const AVX: bool>(
         &self,
@@ -60,6 +64,9 @@ impl RenderScene {
         brute_force: bool,
     ) -> Option<(f32, LocalHit)> {
         let inst = &self.instances[index as usize];
+        if self.has_alpha(inst) {
+            return self.intersect_cut_out::<AVX>(index, ray, t_min, t_max, brute_force);
+        }
         let local = to_object(inst, ray);
         match &inst.geometry {
             InstanceGeometry::Shape(s) => s
@@ -74,6 +81,67 @@ impl RenderScene {
         }
     }
 
+    /// [`RenderScene::intersect_instance_with`] for an instance whose
+    /// material has an alpha mode: the closest hit that is not cut away,
+    /// found by searching again beyond each cut-away hit (each raises
+    /// `t_min` strictly, so this ends). Kept out of line: scenes without
+    /// alpha never call it.
+    #[cold]
+    #[inline(never)]
+    fn intersect_cut_out<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        brute_force: bool,
+    ) -> Option<(f32, LocalHit)> {
+        let inst = &self.instances[index as usize];
+        let local = to_object(inst, ray);
+        let mut t_min = t_min;
+        loop {
+            let (t, h) = match &inst.geometry {
+                InstanceGeometry::Shape(s) => s
+                    .intersect(&local, t_min, t_max)
+                    .map(|h| (h.t, LocalHit::shape(&h))),
+                InstanceGeometry::Mesh(m) => if brute_force {
+                    m.intersect_brute_force(&local, t_min, t_max)
+                } else {
+                    m.intersect_kernel::<AVX>(&local, t_min, t_max)
+                }
+                .map(|h| (h.t, LocalHit::Mesh(h))),
+            }?;
+            if !self.cut_away(inst, ray, t, &h) {
+                return Some((t, h));
+            }
+            t_min = t;
+        }
+    }
+
+    /// True when the scene has cut-outs and `inst`'s material is one.
+    #[inline(always)]
+    fn has_alpha(&self, inst: &Instance) -> bool {
+        self.cutouts && self.materials[inst.material as usize].alpha.is_some()
+    }
+
+    /// True when the hit `h` at `t` of `ray` on `inst` falls where its
+    /// material's alpha removes the surface (a MASK cut-out, or a BLEND
+    /// surface the ray passes through: decided by a hash of the ray, the
+    /// hit's `t` and the instance, so the same ray always gets the same
+    /// answer).
+    #[inline(never)]
+    fn cut_away(&self, inst: &Instance, ray: &Ray, t: f32, h: &LocalHit) -> bool {
+        let Some(alpha) = &self.materials[inst.material as usize].alpha else {
+            return false;
+        };
+        let uv = match (h, &inst.geometry) {
+            (LocalHit::Shape { uv, .. }, _) => *uv,
+            (LocalHit::Mesh(mh), InstanceGeometry::Mesh(m)) => m.surface(mh).uv,
+            (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => return false,
+        };
+        alpha.passes(uv, ray_hash(ray, t))
+    }
+
     #[inline(always)]
     fn occludes_instance<const AVX: bool>(
         &self,
@@ -83,6 +151,11 @@ impl RenderScene {
         t_max: f32,
     ) -> bool {
         let inst = &self.instances[index as usize];
+        if self.has_alpha(inst) {
+            return self
+                .intersect_instance::<AVX>(index, ray, t_min, t_max)
+                .is_some();
+        }
         let local = to_object(inst, ray);
         match &inst.geometry {
             InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).is_some(),
@@ -227,6 +300,18 @@ impl RenderScene {
             for slot in lf.first..lf.first + lf.count {
                 let index = self.tlas.leaf_instances[slot as usize];
                 let inst = &self.instances[index as usize];
+                if self.has_alpha(inst) {
+                    for_each_lane(lanes, |l| {
+                        let ray = &p.rays[l];
+                        if let Some((t, h)) =
+                            self.intersect_instance::<AVX>(index, ray, p.t_min[l], p.t_max[l])
+                        {
+                            p.t_max[l] = t;
+                            best[l] = Some((t, index, h));
+                        }
+                    });
+                    continue;
+                }
                 match &inst.geometry {
                     InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
                         let local = to_object(inst, &p.rays[l]);
@@ -383,8 +468,20 @@ impl RenderScene {
                 if lanes == 0 {
                     break;
                 }
-                let inst = &self.instances[self.tlas.leaf_instances[slot as usize] as usize];
+                let index = self.tlas.leaf_instances[slot as usize];
+                let inst = &self.instances[index as usize];
                 let now = match &inst.geometry {
+                    _ if self.has_alpha(inst) => {
+                        let mut now = 0;
+                        for_each_lane(lanes, |l| {
+                            if self
+                                .occludes_instance::<AVX>(index, &p.rays[l], p.t_min[l], p.t_max[l])
+                            {
+                                now |= 1 << l;
+                            }
+                        });
+                        now
+                    }
                     InstanceGeometry::Shape(s) => {
                         let mut now = 0;
                         for_each_lane(lanes, |l| {
@@ -457,6 +554,12 @@ impl RenderScene {
                 if sn.dot(gn) < 0.0 {
                     sn = -sn;
                 }
+                if let (Some(map), Some(tangent)) = (
+                    &self.materials[inst.material as usize].normal_map,
+                    s.tangent,
+                ) {
+                    sn = normal_mapped(map, &s, tangent, xf, sn, gn);
+                }
                 (xf.to_world.transform_point3a(s.point), gn, sn, s.uv)
             }
             (LocalHit::Mesh(_), InstanceGeometry::Shape(_)) => {
@@ -473,4 +576,67 @@ impl RenderScene {
             material: inst.material,
         }
     }
+}
+
+/// The shading normal `sn` (world space, unit, on the side of `gn`)
+/// perturbed by the normal map `map` at the mesh surface point `s`, whose
+/// object-space tangent is `tangent`: the map's tangent-space normal in the
+/// frame (tangent, bitangent, normal) with the bitangent
+/// `tangent.w * cross(normal, tangent)` built in object space and both
+/// carried to world space as vectors. A mapped normal that would face
+/// away from the geometric side (or a degenerate frame) keeps `sn`. Out
+/// of line: hits without normal maps only pay for the check.
+#[cold]
+#[inline(never)]
+fn normal_mapped(
+    map: &crate::scene::material::NormalMap,
+    s: &crate::geometry::mesh::MeshSurface,
+    tangent: glam::Vec4,
+    xf: &crate::geometry::transform::InstanceTransform,
+    sn: Vec3A,
+    gn: Vec3A,
+) -> Vec3A {
+    let n_obj = s.shading_normal.normalize_or_zero();
+    let t_obj = Vec3A::from(tangent.truncate());
+    let t_obj = (t_obj - n_obj * n_obj.dot(t_obj)).normalize_or_zero();
+    if t_obj == Vec3A::ZERO {
+        return sn;
+    }
+    let b_obj = n_obj.cross(t_obj) * tangent.w;
+    let t = xf.to_world.transform_vector3a(t_obj);
+    let b = xf.to_world.transform_vector3a(b_obj);
+    // The frame's normal as the mesh has it (`sn` may have been turned
+    // to the geometric side; the mapped normal is turned with it).
+    let n = xf.normal(s.shading_normal);
+    let local = map.normal(s.uv);
+    let mut mapped = (t * local.x + b * local.y + n * local.z).normalize_or_zero();
+    if n.dot(sn) < 0.0 {
+        mapped = -mapped;
+    }
+    if mapped.dot(gn) > 0.0 { mapped } else { sn }
+}
+
+/// A uniform number in `[0, 1)` that is a pure function of a ray and a
+/// hit distance (stochastic transparency of BLEND surfaces): the same ray
+/// meets the same surface the same way whatever the thread or integrator,
+/// while the jittered camera rays and the shadow rays of different samples
+/// decide independently.
+#[inline]
+fn ray_hash(ray: &Ray, t: f32) -> f32 {
+    let mut h = 0x9e37_79b9_7f4a_7c15u64;
+    for v in [
+        ray.origin.x,
+        ray.origin.y,
+        ray.origin.z,
+        ray.direction.x,
+        ray.direction.y,
+        ray.direction.z,
+        t,
+    ] {
+        h = (h ^ v.to_bits() as u64).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h ^= h >> 29;
+    }
+    h = (h ^ (h >> 32)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    h ^= h >> 31;
+    (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
 }

@@ -50,6 +50,10 @@ pub struct RenderScene {
     /// Seconds spent building the top-level BVH (by [`RenderScene::new`],
     /// or by the last [`RenderScene::commit`] that changed it).
     pub(super) tlas_build_seconds: f64,
+    /// True when some material has an alpha mode
+    /// ([`Material::alpha`]): only then do intersection queries look at
+    /// materials ([`has_cutouts`]; kept up to date by the material updates).
+    pub(super) cutouts: bool,
 }
 
 impl RenderScene {
@@ -90,6 +94,7 @@ impl RenderScene {
         let tlas = Tlas::build(instances.len(), |i| instances[i].placement(), quality);
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
+            cutouts: has_cutouts(&materials),
             instances,
             materials,
             origin,
@@ -197,6 +202,12 @@ impl RenderScene {
 }
 
 /// Lights placed in the world, resolved in the frame centred on `origin`.
+/// True when any of `materials` has an alpha mode (cut-outs or
+/// transparency), which intersection queries must then honour.
+pub(super) fn has_cutouts(materials: &[Material]) -> bool {
+    materials.iter().any(|m| m.alpha.is_some())
+}
+
 pub(super) fn resolve_lights(sources: &[(Light, Transform)], origin: DVec3) -> Vec<WorldLight> {
     sources
         .iter()

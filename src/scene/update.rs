@@ -7,7 +7,7 @@ use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
-use crate::scene::render_scene::{RenderScene, resolve_lights};
+use crate::scene::render_scene::{RenderScene, has_cutouts, resolve_lights};
 use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.
@@ -73,6 +73,7 @@ impl RenderScene {
     /// Appends a material; returns its index.
     pub fn push_material(&mut self, material: Material) -> u32 {
         self.emitters_stale = true;
+        self.cutouts |= material.alpha.is_some();
         self.materials.push(material);
         self.materials.len() as u32 - 1
     }
@@ -81,6 +82,7 @@ impl RenderScene {
     pub fn set_material(&mut self, index: u32, material: Material) {
         self.emitters_stale = true;
         self.materials[index as usize] = material;
+        self.cutouts = has_cutouts(&self.materials);
     }
 
     /// Removes material `index` by moving the last material into its
@@ -101,7 +103,9 @@ impl RenderScene {
                 }
             }
         }
-        self.materials.swap_remove(index as usize)
+        let removed = self.materials.swap_remove(index as usize);
+        self.cutouts = has_cutouts(&self.materials);
+        removed
     }
 
     /// Replaces the lights (placed in world coordinates).

@@ -70,6 +70,14 @@ pub fn brdf_cos(surface: &SurfaceSample, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Colo
     if cos_i <= 0.0 {
         return Color::ZERO;
     }
+    brdf(surface, n, wo, wi) * cos_i
+}
+
+/// The local model's BRDF `kd/pi + ks (s+8)/(8 pi) (n.h)^s` alone (no
+/// cosine, no test of which side `wi` is on): photon density estimates
+/// weigh each photon's flux by it.
+#[inline]
+pub fn brdf(surface: &SurfaceSample, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Color {
     let mut f = surface.diffuse * (1.0 / PI);
     if surface.specular.max_element() > 0.0 {
         let h = (wo + wi).normalize_or_zero();
@@ -77,7 +85,7 @@ pub fn brdf_cos(surface: &SurfaceSample, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Colo
         let s = surface.shininess;
         f += surface.specular * ((s + 8.0) / (8.0 * PI) * cos_h.powf(s));
     }
-    f * cos_i
+    f
 }
 
 /// A shadow ray and the radiance it carries if unoccluded.

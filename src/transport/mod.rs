@@ -6,4 +6,5 @@
 pub mod gooch;
 pub mod interaction;
 pub mod path;
+pub mod photon;
 pub mod whitted;

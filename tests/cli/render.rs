@@ -187,6 +187,10 @@ fn help_explains_every_option() {
         "--crease-angle",
         "--lines-svg",
         "--hidden-lines",
+        "--overlay",
+        "--overlay-depth",
+        "--overlay-svg",
+        "--overlay-visible-only",
     ] {
         assert!(help.contains(opt), "--help lacks {opt}:\n{help}");
     }
@@ -492,6 +496,128 @@ intensity = 60
     assert_ne!(read("near.exr"), read("far-world.exr"));
 }
 
+/// A small scene with a mesh (a torus knot) and a sphere.
+const KNOT: &str = r#"
+[settings]
+width = 64
+height = 48
+[camera]
+look_from = [0, 0.5, 4]
+look_at = [0, 0, 0]
+[[objects]]
+shape = { type = "torus_knot", radius = 1.0, tube = 0.3, segments = 48, sides = 6 }
+[[objects]]
+shape = { type = "sphere", radius = 0.4 }
+[[lights]]
+type = "point"
+position = [2, 3, 4]
+intensity = 40
+"#;
+
+#[test]
+fn overlay_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::scenes::write(dir.path(), "knot.toml", KNOT);
+    let out = dir.path().join("o.png");
+    let svg = dir.path().join("o.svg");
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--overlay", "octree"], &["octree"]),
+        (&["--overlay-depth", "3"], &["--overlay"]),
+        (
+            &["--overlay", "kdtree", "--overlay-depth", "0"],
+            &["--overlay-depth", "64"],
+        ),
+        (
+            &["--overlay", "bvh", "--overlay-depth", "65"],
+            &["--overlay-depth", "64"],
+        ),
+        (
+            &["--overlay", "kdtree", "--overlay-depth", "99999999999"],
+            &["--overlay-depth"],
+        ),
+        (
+            &["--overlay", "wireframe", "--overlay-depth", "2"],
+            &["levels"],
+        ),
+        (&["--overlay", "grid", "--overlay-depth", "2"], &["levels"]),
+        (
+            &["--overlay", "kdtree", "--accel", "grid"],
+            &["--accel grid", "kd"],
+        ),
+        (
+            &["--overlay", "bvh", "--overlay-svg", "/no/such/folder/o.svg"],
+            &["o.svg"],
+        ),
+        (&["--overlay", "bvh", "--overlay-svg", "o.txt"], &[".svg"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = extra.to_vec();
+        if !args.contains(&"--overlay-svg") && args.contains(&"--overlay") {
+            args.extend(["--overlay-svg", svg.to_str().unwrap()]);
+        }
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+        assert!(!svg.exists(), "{extra:?} left an SVG");
+    }
+    // Shards are refused too.
+    let exr = dir.path().join("o.exr");
+    let o = render(&scene, &exr, &["--overlay", "grid", "--shard", "0/2"]);
+    assert_clean_failure(&o, &exr, &["--overlay", "shards"]);
+}
+
+#[test]
+fn overlay_image_and_svg_are_written_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::scenes::write(dir.path(), "knot.toml", KNOT);
+    let plain = dir.path().join("plain.png");
+    assert_success(&render(&scene, &plain, &["--accel", "kdtree"]));
+    let out = dir.path().join("o.png");
+    let svg = dir.path().join("o.svg");
+    let o = render(
+        &scene,
+        &out,
+        &[
+            "--overlay",
+            "kdtree",
+            "--overlay-depth",
+            "3",
+            "--overlay-svg",
+            svg.to_str().unwrap(),
+        ],
+    );
+    assert_success(&o);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<?xml") && text.trim_end().ends_with("</svg>"));
+    assert!(text.contains(r#"class="plane visible""#), "{text}");
+    assert!(text.contains(r#"class="plane hidden""#), "{text}");
+    assert!(text.contains(r#"class="bounds "#), "{text}");
+    // The lines are drawn over the image, which is otherwise the render.
+    let (a, b) = (
+        image::open(&plain).unwrap().to_rgb8(),
+        image::open(&out).unwrap().to_rgb8(),
+    );
+    let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(
+        changed > 50 && changed < a.len() / 3 / 2,
+        "{changed} pixels changed"
+    );
+    // Only the scene, the two images and the SVG: no temporary file left.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
+    // Visible pieces only: no hidden line in the SVG.
+    let o = render(
+        &scene,
+        &out,
+        &[
+            "--overlay",
+            "wireframe",
+            "--overlay-visible-only",
+            "--overlay-svg",
+            svg.to_str().unwrap(),
+        ],
+    );
+    assert_success(&o);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains(r#"class="triangle visible""#) && !text.contains("triangle hidden"));
 /// Bad environment maps and options, given with `--env` or in a scene's
 /// `[environment]`: a clear error naming the problem, no output file.
 #[test]
@@ -589,4 +715,56 @@ fn the_sample_environment_map_renders() {
     let img = image::open(&out_file).unwrap().to_rgb32f();
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
     assert!(img.pixels().any(|p| p.0[1] > 0.1));
+/// Photon transport's options reject bad values with a clear message, and
+/// the wavefront integrator says it does not run photon transport.
+#[test]
+fn photon_options_reject_bad_input_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("caustic.toml");
+    let out = dir.path().join("c.png");
+    let small = ["--width", "8", "--height", "6"];
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["--photons", "0"], &["photons per iteration"]),
+        (&["--photon-radius", "0"], &["radius"]),
+        (&["--photon-radius", "nan"], &["radius", "NaN"]),
+        (&["--photon-radius", "-1"], &["radius"]),
+        (&["--photon-alpha", "1"], &["alpha"]),
+        (&["--photon-iterations", "0"], &["iterations"]),
+        (
+            &["--photon-iterations", "1048576", "--spp", "2"],
+            &["iterations times samples"],
+        ),
+        (&["--integrator", "wavefront"], &["recursive"]),
+    ];
+    for (extra, words) in cases {
+        let mut args: Vec<&str> = small.to_vec();
+        args.extend_from_slice(extra);
+        let o = render(&scene, &out, &args);
+        assert_clean_failure(&o, &out, words);
+    }
+    // Shards need the whole image's photons per pixel row: refused.
+    let exr = dir.path().join("c.exr");
+    let mut args: Vec<&str> = small.to_vec();
+    args.extend_from_slice(&["--shard", "0/2"]);
+    assert_clean_failure(&render(&scene, &exr, &args), &exr, &["whole image"]);
+    // The same in a scene file's [settings.photon], named by its key.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[settings]\ntransport = \"photon\"\n[settings.photon]\nradius = 0.0\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
+    )
+    .unwrap();
+    assert_clean_failure(
+        &render(&bad, &out, &[]),
+        &out,
+        &["settings.photon", "radius"],
+    );
+    // A scene with nothing to emit photons.
+    let dark = dir.path().join("dark.toml");
+    std::fs::write(
+        &dark,
+        "[settings]\ntransport = \"photon\"\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
+    )
+    .unwrap();
+    assert_clean_failure(&render(&dark, &out, &[]), &out, &["needs a light"]);
 }

@@ -190,6 +190,7 @@ material = { color = 0.0, emission = [0, 0, 1] }
             vfov_degrees: 20.0,
             shift: glam::Vec2::ZERO,
             name: None,
+            ..Default::default()
         },
         w,
         h,
@@ -261,6 +262,7 @@ illuminance = 3.0
             vfov_degrees: 45.0,
             shift: glam::Vec2::ZERO,
             name: None,
+            ..Default::default()
         },
         w,
         h,
@@ -379,6 +381,7 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
             vfov_degrees: 12.0,
             shift: glam::Vec2::ZERO,
             name: None,
+            ..Default::default()
         },
         120,
         120,

@@ -18,7 +18,7 @@ use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::io::desc::{Geometry, ObjectDesc, SceneDesc};
 use prism::scene::camera::{Camera, CameraRays};
-use prism::scene::environment::{Environment, EnvironmentMap, EnvironmentSource, direction_to_uv};
+use prism::scene::environment::{Environment, EnvironmentMap, EnvironmentSource};
 use prism::scene::material::Material;
 
 use crate::common::images::{assert_same_image, film_bits};
@@ -205,7 +205,13 @@ material = {{ diffuse = 0, mirror = 1 }}
             } else {
                 d
             };
-            let uv = direction_to_uv(seen) * Vec2::new(w as f32, h as f32);
+            // The documented convention, written out here: u = 1/2 +
+            // atan2(z, x) / 2 pi, v = acos(y) / pi.
+            let seen = seen.normalize();
+            let uv = Vec2::new(
+                0.5 + seen.z.atan2(seen.x) / (2.0 * std::f32::consts::PI),
+                seen.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI,
+            ) * Vec2::new(w as f32, h as f32);
             // Skip directions within 1e-3 texel of the texel's edges.
             let margin = |c: f32, lo: u32| (c - lo as f32).min(lo as f32 + 1.0 - c);
             let inside = margin(uv.x, ti).min(margin(uv.y, tj));

@@ -142,7 +142,7 @@ fn gooch_sphere_matches_the_closed_form_at_every_pixel_in_both_integrators() {
 
 /// A pinhole camera in f64, built as `CameraRays` builds it: the
 /// independent projection the line tests compare against.
-struct Pinhole {
+pub(crate) struct Pinhole {
     eye: DVec3,
     right: DVec3,
     up: DVec3,
@@ -154,7 +154,7 @@ struct Pinhole {
 }
 
 impl Pinhole {
-    fn new(eye: [f64; 3], at: [f64; 3], vfov: f64, w: u32, h: u32) -> Self {
+    pub(crate) fn new(eye: [f64; 3], at: [f64; 3], vfov: f64, w: u32, h: u32) -> Self {
         let eye = DVec3::from(eye);
         let forward = (DVec3::from(at) - eye).normalize();
         let right = forward.cross(DVec3::Y).normalize();
@@ -172,8 +172,13 @@ impl Pinhole {
         }
     }
 
+    /// Distance of world point `p` in front of the eye along the view.
+    pub(crate) fn depth(&self, p: DVec3) -> f64 {
+        (p - self.eye).dot(self.forward)
+    }
+
     /// Film position in pixels of world point `p`.
-    fn project(&self, p: DVec3) -> glam::DVec2 {
+    pub(crate) fn project(&self, p: DVec3) -> glam::DVec2 {
         let d = p - self.eye;
         let z = d.dot(self.forward);
         let (x, y) = (d.dot(self.right) / z, d.dot(self.up) / z);
@@ -267,7 +272,7 @@ fn sphere_silhouette_is_the_circle_of_angular_radius_asin_r_over_d() {
 }
 
 /// A flat-shaded cube of side 2 at the origin in three-quarter view.
-const CUBE: &str = r#"
+pub(crate) const CUBE: &str = r#"
 [camera]
 look_from = [3, 2.5, 4]
 look_at = [0, 0, 0]
@@ -378,7 +383,7 @@ fn cube_shows_its_three_interior_edges_exactly_below_ninety_degrees() {
 
 /// A UV sphere mesh of radius 1 with `segments` x `rings` quads as TOML
 /// arrays: positions and indices.
-fn uv_sphere(segments: usize, rings: usize) -> (String, String) {
+pub(crate) fn uv_sphere(segments: usize, rings: usize) -> (String, String) {
     let mut pos = Vec::new();
     for r in 0..=rings {
         let theta = std::f64::consts::PI * r as f64 / rings as f64;
@@ -595,7 +600,7 @@ translate = [0, 0, 6]
 // Vector lines
 
 /// The cube with a smooth sphere mesh in front of one corner.
-fn cube_and_sphere_mesh() -> String {
+pub(crate) fn cube_and_sphere_mesh() -> String {
     let (pos, idx) = uv_sphere(24, 12);
     format!(
         r#"{CUBE}

@@ -9,6 +9,8 @@
 //!   through the `prism` binary, mirror, lens, shadows, determinism);
 //! * `cargo test --test render path::` — path transport against analytic
 //!   answers (white furnace, area lights) and the Whitted tracer;
+//! * `cargo test --test render photon::` — photon transport against the
+//!   path tracer (Cornell box) and bit for bit across thread counts;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -23,7 +25,11 @@
 //!   panoramas read back as environments, and against each other;
 //! * `cargo test --test render lightfield::` — views synthesised from
 //!   captured light fields against the captures and direct renders, and
-//!   bad light fields refused.
+//!   bad light fields refused;
+//! * `cargo test --test render overlay::` — the structure overlays
+//!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
+//!   clipping and visibility against independent f64 and brute-force
+//!   answers, and the kd-tree's planes counted.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -33,8 +39,11 @@ mod environment;
 mod illustration;
 mod large_worlds;
 mod lightfield;
+mod models;
+mod overlay;
 mod panorama;
 mod path;
+mod photon;
 mod robustness;
 mod scene_updates;
 mod shards;

@@ -135,6 +135,7 @@ fn floor_scene(light: &str) -> (String, Camera) {
         vfov_degrees: 60.0,
         shift: glam::Vec2::ZERO,
         name: None,
+        ..Default::default()
     };
     let scene = format!(
         r#"

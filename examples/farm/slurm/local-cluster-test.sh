@@ -94,7 +94,13 @@ cleanup() {
   done
   if [ -n "$munge_pid" ]; then kill "$munge_pid" 2>/dev/null || true; fi
   if [ $status -eq 0 ]; then
-    rm -rf "$work"
+    # The daemons write their state files as they exit: wait for them
+    # (up to 10 s) before removing the folder.
+    for _ in $(seq 20); do
+      pgrep -f "$work/slurm.conf" >/dev/null || break
+      sleep 0.5
+    done
+    rm -rf "$work" 2>/dev/null || { sleep 1; rm -rf "$work"; }
   else
     echo "FAILED (status $status); logs and images kept in $work" >&2
   fi

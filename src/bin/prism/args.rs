@@ -198,6 +198,47 @@ impl TransportFlag {
     }
 }
 
+/// Photon mapping's options (render), each falling back to the scene's
+/// `[settings.photon]` and then to the defaults.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct PhotonFlags {
+    /// Photon transport: photons traced per iteration, shared among the
+    /// lights by power [default: the scene's, else 100000].
+    #[arg(long, value_name = "N")]
+    pub photons: Option<u32>,
+    /// Photon transport: gather radius of the first iteration, in scene
+    /// units, above 0 [default: the scene's, else its bounding-box diagonal / 200].
+    #[arg(long, value_name = "R", allow_hyphen_values = true)]
+    pub photon_radius: Option<f32>,
+    /// Photon transport: radius reduction alpha in (0, 1); iteration i+1
+    /// gathers over r^2 (i + alpha) / (i + 1) [default: the scene's, else 2/3].
+    #[arg(long, value_name = "ALPHA", allow_hyphen_values = true)]
+    pub photon_alpha: Option<f32>,
+    /// Photon transport: iterations, each with its own photons and `--spp`
+    /// camera samples per pixel; the image is their mean [default: the
+    /// scene's, else 16].
+    #[arg(long, value_name = "N")]
+    pub photon_iterations: Option<u32>,
+    /// Photon transport: final-gather rays per camera sample; 0 reads the
+    /// photon maps directly at the first diffuse surface seen [default: the
+    /// scene's, else 0].
+    #[arg(long, value_name = "N")]
+    pub final_gather: Option<u32>,
+}
+
+impl PhotonFlags {
+    /// The values given.
+    pub fn overrides(&self) -> prism::core::photon_settings::PhotonOverrides {
+        prism::core::photon_settings::PhotonOverrides {
+            photons: self.photons,
+            radius: self.photon_radius,
+            alpha: self.photon_alpha,
+            iterations: self.photon_iterations,
+            gather_rays: self.final_gather,
+        }
+    }
+}
+
 /// `--batch-paths` (render, bench).
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct BatchPathsFlag {
@@ -269,6 +310,9 @@ pub enum TransportArg {
     /// Path tracing with next-event estimation and MIS; emissive surfaces
     /// are area lights.
     Path,
+    /// Progressive photon mapping: caustic and global photon maps from
+    /// every light, read at diffuse surfaces (recursive integrator).
+    Photon,
 }
 
 impl From<TransportArg> for Transport {
@@ -276,6 +320,7 @@ impl From<TransportArg> for Transport {
         match a {
             TransportArg::Whitted => Transport::Whitted,
             TransportArg::Path => Transport::Path,
+            TransportArg::Photon => Transport::Photon,
         }
     }
 }

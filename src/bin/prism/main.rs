@@ -37,7 +37,7 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Measure speed against accuracy: render a converged reference, sweep
     /// one knob at a time (spp, depth, contribution threshold, light
-    /// samples, Russian roulette, BVH preset, transport, sampler) around a base
+    /// samples, Russian roulette, BVH preset, transport, sampler, photon iterations) around a base
     /// configuration, and write tradeoff.csv and a plot of error against
     /// render time with the Pareto front.
     Tradeoff(tradeoff::TradeoffArgs),

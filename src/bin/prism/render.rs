@@ -20,13 +20,14 @@ use prism::systems::{self, Frame, RenderConfig, Renderer, SceneAccel};
 
 use crate::args::StyleArg;
 use crate::args::{
-    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, QualityArg,
-    SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
+    BatchPathsFlag, FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, PhotonFlags,
+    QualityArg, SeedFlag, ThreadsFlag, ToneMapArg, TransportFlag, png_options,
 };
 use crate::shard::{self, PixelBounds, ShardSpec};
 use crate::stats::{RenderStats, WavefrontStatsJson};
-use crate::vector;
+use crate::vector::{self, OverlayRequest};
 use prism::core::settings::{GoochParams, LineSettings};
+use prism::integrators::overlay::{self, OverlayKind};
 
 /// `--render-origin`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,6 +75,92 @@ fn environment(args: &RenderArgs, scene: Option<Environment>) -> Result<Option<E
     Ok(Some(Environment::new(source, intensity, rotation)))
 }
 
+/// Camera overrides of `prism render`, applied to the chosen camera
+/// (the scene's, or the automatic one of a scene without a camera).
+#[derive(clap::Args, Debug, Default)]
+pub struct ViewFlags {
+    /// Eye position X,Y,Z (world coordinates) [default: the camera's; a
+    /// scene without a camera is framed from +Z, see the README].
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    look_from: Option<Vec<f64>>,
+    /// Point looked at X,Y,Z [default: the camera's; the centre of the
+    /// scene's bounds for the automatic camera].
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    look_at: Option<Vec<f64>>,
+    /// Vertical field of view in degrees, in (0, 180) [default: the
+    /// camera's; 40 for the automatic camera].
+    #[arg(long, value_name = "DEG")]
+    fov: Option<f32>,
+    /// Depth of field: radius of the thin lens's aperture in scene units
+    /// (0: pinhole, the same image bit for bit) [default: the camera's, 0].
+    #[arg(long, value_name = "R", conflicts_with = "f_number")]
+    aperture_radius: Option<f32>,
+    /// Depth of field: the aperture as an f-number N, radius f/(2N) with
+    /// the focal length f of a 36x24 mm camera of the same field of view.
+    #[arg(long, value_name = "N")]
+    f_number: Option<f32>,
+    /// Depth of field: distance of the plane in focus along the viewing
+    /// direction [default: the camera's, else the distance to its look-at
+    /// point].
+    #[arg(long, value_name = "D")]
+    focus_distance: Option<f32>,
+}
+
+impl ViewFlags {
+    /// Applies the overrides to `camera` and checks the result.
+    fn apply(&self, camera: &mut prism::scene::camera::Camera) -> Result<()> {
+        let point = |name: &str, v: &Option<Vec<f64>>| -> Result<Option<glam::DVec3>> {
+            match v {
+                None => Ok(None),
+                Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
+                    Ok(Some(glam::DVec3::new(v[0], v[1], v[2])))
+                }
+                Some(v) => Err(Error::Invalid(format!(
+                    "--{name} takes three finite numbers x,y,z, got {v:?}"
+                ))),
+            }
+        };
+        if let Some(p) = point("look-from", &self.look_from)? {
+            camera.look_from = p;
+        }
+        if let Some(p) = point("look-at", &self.look_at)? {
+            camera.look_at = p;
+        }
+        if let Some(f) = self.fov {
+            camera.vfov_degrees = f;
+        }
+        if let Some(d) = self.focus_distance {
+            camera.focus_distance = d;
+        }
+        if let Some(r) = self.aperture_radius {
+            camera.lens_radius = r;
+        }
+        if let Some(n) = self.f_number {
+            if !(n.is_finite() && n > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "--f-number must be a positive number, got {n}"
+                )));
+            }
+            camera.set_f_number(n);
+        }
+        camera.validate().map_err(|e| {
+            Error::Invalid(format!(
+                "the camera after --look-from/--look-at/--fov/lens options: {e}"
+            ))
+        })
+    }
+}
+
 /// Options of `prism render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -102,6 +189,9 @@ pub struct RenderArgs {
     /// `--camera-projection`.
     #[command(flatten)]
     projection: crate::args::ProjectionFlag,
+    /// `--look-from`, `--look-at`, `--fov` and the lens.
+    #[command(flatten)]
+    view: ViewFlags,
     /// Exposure in stops for PNG output: radiance is scaled by 2^EV
     /// [default: the scene's, else 0].
     #[arg(long, value_name = "EV", allow_hyphen_values = true)]
@@ -118,6 +208,10 @@ pub struct RenderArgs {
     /// `--light-samples`, `--rr-depth`.
     #[command(flatten)]
     path: PathFlags,
+    /// `--photons`, `--photon-radius`, `--photon-alpha`,
+    /// `--photon-iterations`, `--final-gather`.
+    #[command(flatten)]
+    photon: PhotonFlags,
     /// Path tracing: never end paths by Russian roulette (unbiased either
     /// way; roulette trades variance for speed).
     #[arg(long, conflicts_with = "rr_depth")]
@@ -198,6 +292,26 @@ pub struct RenderArgs {
     /// segments are left out).
     #[arg(long, requires = "lines_svg")]
     hidden_lines: bool,
+    /// Draw lines over the image: `wireframe` (every triangle edge),
+    /// `bvh` (the BVH's boxes), `grid` (the grid cells that hold
+    /// triangles) or `kdtree` (the kd-tree's splitting planes), each with
+    /// the mesh's bounds, projected with the camera and clipped to the
+    /// view; pieces hidden behind surfaces (found by casting rays) are
+    /// dashed. bvh, grid and kdtree build the meshes with that structure
+    /// (an --accel naming another one is refused).
+    #[arg(long, value_enum, value_name = "KIND")]
+    overlay: Option<OverlayArg>,
+    /// Levels of the BVH (child boxes below the root) or of the kd-tree
+    /// (splitting planes from the root) the overlay draws, 1 to 64
+    /// [default: 4].
+    #[arg(long, value_name = "N", requires = "overlay")]
+    overlay_depth: Option<u32>,
+    /// Also write the overlay's lines as vectors to FILE.svg.
+    #[arg(long, value_name = "FILE", requires = "overlay")]
+    overlay_svg: Option<PathBuf>,
+    /// Leave the overlay's hidden pieces out instead of dashing them.
+    #[arg(long, requires = "overlay")]
+    overlay_visible_only: bool,
     /// Where the single-precision frame the kernels work in is centred:
     /// at the camera (precision follows the distance to the camera,
     /// whatever the distance to the world origin), or at the world origin
@@ -226,7 +340,75 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+/// `--overlay`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum OverlayArg {
+    /// Every triangle edge.
+    Wireframe,
+    /// The BVH's boxes.
+    Bvh,
+    /// The uniform grid's cells that hold triangles.
+    Grid,
+    /// The kd-tree's splitting planes.
+    Kdtree,
+}
+
+impl From<OverlayArg> for OverlayKind {
+    fn from(a: OverlayArg) -> Self {
+        match a {
+            OverlayArg::Wireframe => OverlayKind::Wireframe,
+            OverlayArg::Bvh => OverlayKind::Bvh,
+            OverlayArg::Grid => OverlayKind::Grid,
+            OverlayArg::Kdtree => OverlayKind::Kdtree,
+        }
+    }
+}
+
 impl RenderArgs {
+    /// The overlay asked for, checked: a depth only for the BVH and the
+    /// kd-tree and within 1 ..= MAX_DEPTH, an SVG path that can be written,
+    /// and no --accel other than the structure drawn.
+    fn overlay(&self) -> Result<Option<OverlayRequest>> {
+        let Some(arg) = self.overlay else {
+            return Ok(None);
+        };
+        let kind = OverlayKind::from(arg);
+        if let Some(d) = self.overlay_depth {
+            if !kind.has_levels() {
+                return Err(Error::Invalid(format!(
+                    "--overlay-depth: the {} overlay has no levels (only bvh and kdtree do)",
+                    kind.name()
+                )));
+            }
+            if !(1..=overlay::MAX_DEPTH).contains(&d) {
+                return Err(Error::Invalid(format!(
+                    "--overlay-depth {d}: must be 1 to {}",
+                    overlay::MAX_DEPTH
+                )));
+            }
+        }
+        if let (Some(want), Some(given)) = (kind.accel(), self.accel) {
+            let given: prism::core::settings::Accel = given.into();
+            if given != want {
+                return Err(Error::Invalid(format!(
+                    "--overlay {} draws the {} the meshes are built with, but --accel {} asks for another structure",
+                    kind.name(),
+                    want.name(),
+                    given.name()
+                )));
+            }
+        }
+        if let Some(svg) = &self.overlay_svg {
+            vector::check_svg_path(svg, "--overlay-svg")?;
+        }
+        Ok(Some(OverlayRequest {
+            kind,
+            depth: self.overlay_depth.unwrap_or(overlay::DEFAULT_DEPTH),
+            hidden: !self.overlay_visible_only,
+            svg: self.overlay_svg.clone(),
+        }))
+    }
+
     /// True when rendering part of the image or of its samples.
     fn is_shard(&self) -> bool {
         self.shard.is_some() || self.pixel_bounds.is_some() || self.samples.is_some()
@@ -237,6 +419,11 @@ impl RenderArgs {
     fn window(&self, settings: &RenderSettings) -> Result<Option<(RenderWindow, String)>> {
         if !self.is_shard() {
             return Ok(None);
+        }
+        if self.overlay.is_some() {
+            return Err(Error::Invalid(
+                "--overlay draws over the whole image and is not available for shards".into(),
+            ));
         }
         if settings.lines.is_some() || self.lines_svg.is_some() {
             return Err(Error::Invalid(
@@ -295,8 +482,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )));
     }
     if let Some(svg) = &args.lines_svg {
-        vector::check_svg_path(svg)?;
+        vector::check_svg_path(svg, "--lines-svg")?;
     }
+    let overlay_request = args.overlay()?;
     if let Some(s) = &args.stats
         && s.extension().and_then(|e| e.to_str()) != Some("json")
     {
@@ -306,15 +494,24 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )));
     }
     let (pool, threads) = args.threads.pool()?;
-    pool.install(|| render_with_pool(&args, threads, wall))
+    pool.install(|| render_with_pool(&args, overlay_request, threads, wall))
 }
 
-fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<()> {
+fn render_with_pool(
+    args: &RenderArgs,
+    overlay_request: Option<OverlayRequest>,
+    threads: usize,
+    wall: Instant,
+) -> Result<()> {
     let quality: BuildQuality = args.bvh_quality.into();
     let load_start = Instant::now();
     let options = prism::geometry::mesh::BuildOptions {
         quality,
-        accel: args.accel.map(Into::into),
+        // A structure overlay builds the meshes with the structure it draws.
+        accel: args
+            .accel
+            .map(Into::into)
+            .or(overlay_request.as_ref().and_then(|o| o.kind.accel())),
     };
     let (mut desc, scene_hash) = if args.is_shard() {
         let (desc, hash) = prism::io::load_with_digest(&args.scene, options)?;
@@ -390,6 +587,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         light_samples: args.path.light_samples,
         sampler: args.path.sampler(),
         panorama: args.projection.get(),
+        photon: args.photon.overrides(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
@@ -415,15 +613,14 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         ))
     })?;
     let png = png_options(args.exposure.or(s.exposure).unwrap_or(0.0), args.tonemap)?;
-    // The CLI's own words for camera problems, before Renderer::with_scene
-    // would give its more general ones.
-    let camera_count = desc.cameras.len();
-    if camera_count == 0 {
-        return Err(Error::load(
-            &args.scene,
-            "the scene has no camera (add a [camera] table or a glTF camera)",
-        ));
+    // A bare model gets a camera framing it and a light, like in a glTF
+    // viewer; the CLI's own words for camera problems, before
+    // Renderer::with_scene would give its more general ones.
+    let aspect = settings.width as f64 / settings.height as f64;
+    if let Some(n) = desc.ensure_camera(aspect) {
+        eprintln!("notice: {}: {n}", args.scene.display());
     }
+    let camera_count = desc.cameras.len();
     if args.camera >= camera_count {
         return Err(Error::Invalid(format!(
             "--camera {}: the scene has {camera_count} camera(s), numbered from 0",
@@ -437,16 +634,31 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             p.name()
         )));
     }
+    args.view.apply(&mut desc.cameras[args.camera])?;
+    let chosen = desc.cameras[args.camera].clone();
+    if let Some(n) = desc.ensure_light(&chosen, settings.transport) {
+        eprintln!("notice: {}: {n}", args.scene.display());
+    }
     let light_count = desc.lights.len();
     let camera = desc.cameras[args.camera].clone();
 
     // The line stage reports its rows on the same bar.
     let passes = 1 + settings.lines.is_some() as u64;
-    let bar = progress_bar(
-        settings.window().row_count() as u64 * passes,
-        args.quiet,
-        "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
-    );
+    let bar = if settings.transport == prism::core::settings::Transport::Photon {
+        // Each iteration's photon pass and camera pass report a share each.
+        progress_bar(
+            prism::integrators::photon::progress_steps(&settings)
+                + settings.lines.is_some() as u64 * settings.height as u64,
+            args.quiet,
+            "{spinner} photon mapping [{bar:40}] {percent}% {elapsed_precise} (eta {eta})",
+        )
+    } else {
+        progress_bar(
+            settings.window().row_count() as u64 * passes,
+            args.quiet,
+            "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
+        )
+    };
     let progress: Option<systems::ProgressFn> = bar.clone().map(|b| {
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
@@ -490,6 +702,18 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
     let Some(film) = &frame.film else {
         return Err(Error::Invalid("the renderer produced no image".into()));
     };
+    let overlay_mask = match &overlay_request {
+        Some(req) => {
+            let scene = accel
+                .scene
+                .as_ref()
+                .ok_or_else(|| Error::Invalid("no scene was built".into()))?;
+            Some(vector::overlay_lines(
+                req, scene, &camera, &settings, args.quiet,
+            )?)
+        }
+        None => None,
+    };
     match (&window, scene_hash) {
         (Some((w, spec)), Some(scene_hash)) => {
             let manifest = Manifest {
@@ -521,12 +745,16 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
             );
             prism::image::shard::write_shard(&args.output, &shard)?;
         }
-        _ => prism::image::output::write_image_with_lines(
-            &args.output,
-            film,
-            frame.lines.as_ref(),
-            &png,
-        )?,
+        _ => {
+            let mut overlays: Vec<&prism::image::lines::LineOverlay> = frame.lines.iter().collect();
+            overlays.extend(overlay_mask.as_ref().map(|(mask, _)| mask));
+            prism::image::output::write_image_with_overlays(&args.output, film, &overlays, &png)?;
+            if let (Some(req), Some((_, Some(svg)))) = (&overlay_request, &overlay_mask)
+                && let Some(path) = &req.svg
+            {
+                prism::image::output::write_atomic(path, svg.as_bytes())?;
+            }
+        }
     }
     if let Some(svg) = &args.lines_svg {
         let scene = accel
@@ -569,6 +797,7 @@ fn render_with_pool(args: &RenderArgs, threads: usize, wall: Instant) -> Result<
         nonfinite_samples: frame.counters.nonfinite_samples,
         line_seconds: frame.lines.as_ref().map(|_| frame.line_seconds),
         line_rays: frame.lines.as_ref().map(|_| frame.line_rays),
+        photon: frame.photon,
         wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,

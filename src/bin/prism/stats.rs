@@ -31,6 +31,10 @@ pub struct RenderStats {
     pub integrator: String,
     /// Light transport name.
     pub transport: String,
+    /// Photon passes (photon transport only): photons, radii, time and
+    /// peak map memory.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub photon: Option<prism::integrators::photon::PhotonReport>,
     /// What the scene contains, which decides the stages that run.
     pub features: SceneFeatures,
     /// Whole run, from start to written image.

@@ -20,7 +20,7 @@ use crate::integrators::wavefront::queues::{
 use crate::integrators::wavefront::routing::{
     ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
 };
-use crate::integrators::{accumulate, film_sample};
+use crate::integrators::{accumulate, camera_ray};
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
@@ -51,7 +51,7 @@ pub fn generate_camera_rays(
             k.pixel(settings.width),
             k.sample,
         );
-        let ray = camera.ray(film_sample(k.x, k.y, settings.spp, &mut sampler));
+        let ray = camera_ray(camera, k.x, k.y, settings.spp, &mut sampler);
         out.push(RayItem {
             ray,
             throughput: Color::ONE,

@@ -1,7 +1,7 @@
 //! Accessors: vertex attributes and indices copied out of their buffer
 //! views with bounds checks, sparse substitution and normalized integers.
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 
 use super::Ctx;
@@ -174,6 +174,13 @@ pub(super) fn read_vec2(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<Vec<Vec2
     Ok(read_floats(ctx, accessor, 2)?
         .chunks_exact(2)
         .map(|c| Vec2::new(c[0], c[1]))
+        .collect())
+}
+
+pub(super) fn read_vec4(ctx: &Ctx, accessor: &gltf::Accessor) -> Result<Vec<Vec4>, String> {
+    Ok(read_floats(ctx, accessor, 4)?
+        .chunks_exact(4)
+        .map(|c| Vec4::new(c[0], c[1], c[2], c[3]))
         .collect())
 }
 

@@ -18,9 +18,10 @@ pub(super) fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
             gltf::Error::Binary(e) => format!("invalid GLB container: {e}"),
             e => format!("cannot parse glTF: {e}"),
         })?;
-    let node_transforms = raw_node_transforms(bytes, is_glb);
-    let json = document.into_json();
+    let raw = raw_nodes(bytes, is_glb);
+    let mut json = document.into_json();
     precheck_json(&json)?;
+    let warnings = check_extensions(&mut json)?;
     let document = gltf::Document::from_json(json).map_err(|e| match e {
         gltf::Error::Validation(errors) => {
             let list: Vec<String> = errors
@@ -47,8 +48,52 @@ pub(super) fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
         document,
         buffers,
         base,
-        node_transforms,
+        node_transforms: raw.iter().map(|n| n.transform).collect(),
+        node_instancing: raw.into_iter().map(|n| n.instancing).collect(),
+        extension_warnings: warnings,
     })
+}
+
+/// The extensions this loader reads (some in part: `KHR_materials_volume`
+/// is accepted but its attenuation ignored, see the module documentation).
+pub(super) const UNDERSTOOD_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_volume",
+    "KHR_materials_specular",
+    "KHR_texture_transform",
+    "KHR_mesh_quantization",
+    "EXT_mesh_gpu_instancing",
+];
+
+/// Fails on an extension in `extensionsRequired` that this loader does
+/// not read (the file cannot be shown correctly without it), and returns
+/// a warning for each one in `extensionsUsed` that it does not read (an
+/// optional extension, whose content is ignored). The required list is
+/// then emptied: every entry is understood, and the `gltf` crate's own
+/// check knows fewer extensions than this loader.
+fn check_extensions(json: &mut gltf::json::Root) -> Result<Vec<String>, String> {
+    let unknown = |e: &&String| !UNDERSTOOD_EXTENSIONS.contains(&e.as_str());
+    let required: Vec<&String> = json.extensions_required.iter().filter(unknown).collect();
+    if !required.is_empty() {
+        let list: Vec<&str> = required.iter().map(|s| s.as_str()).collect();
+        return Err(format!(
+            "the file requires glTF extension{} {} which Prism does not support \
+             (supported: {})",
+            if list.len() == 1 { "" } else { "s" },
+            list.join(", "),
+            UNDERSTOOD_EXTENSIONS.join(", ")
+        ));
+    }
+    json.extensions_required.clear();
+    Ok(json
+        .extensions_used
+        .iter()
+        .filter(unknown)
+        .map(|e| format!("optional extension {e} is not supported; its content is ignored"))
+        .collect())
 }
 
 /// The JSON text of a `.gltf` file or of a GLB's first chunk.
@@ -67,46 +112,86 @@ fn json_bytes(bytes: &[u8], is_glb: bool) -> Option<&[u8]> {
     bytes.get(20..20usize.checked_add(len)?)
 }
 
-/// Every node's local transform read from the JSON in double precision.
-/// The `gltf` crate has already parsed and validated the same text, so a
-/// failure here only means falling back to its f32 values.
-fn raw_node_transforms(bytes: &[u8], is_glb: bool) -> Vec<Option<glam::DAffine3>> {
+/// What this loader re-reads of a node's JSON itself.
+#[derive(Default)]
+pub(super) struct RawNode {
+    /// The local transform in double precision; `None` when it could not
+    /// be read (the `gltf` crate's f32 value is used instead).
+    pub transform: Option<glam::DAffine3>,
+    /// `EXT_mesh_gpu_instancing` accessor indices.
+    pub instancing: Option<Instancing>,
+}
+
+/// The attributes of a node's `EXT_mesh_gpu_instancing` extension: accessor
+/// indices of per-instance translations (VEC3), rotations (unit
+/// quaternions, VEC4) and scales (VEC3).
+#[derive(Clone, Copy, Debug, Default, serde::Deserialize)]
+pub(super) struct Instancing {
+    #[serde(rename = "TRANSLATION")]
+    pub translation: Option<usize>,
+    #[serde(rename = "ROTATION")]
+    pub rotation: Option<usize>,
+    #[serde(rename = "SCALE")]
+    pub scale: Option<usize>,
+}
+
+/// Every node's local transform (in double precision) and instancing
+/// attributes, read from the JSON. The `gltf` crate has already parsed and
+/// validated the same text, so a failure here only means falling back to
+/// its f32 transforms (and no instancing).
+fn raw_nodes(bytes: &[u8], is_glb: bool) -> Vec<RawNode> {
     #[derive(serde::Deserialize)]
-    struct RawRoot {
+    struct Root {
         #[serde(default)]
-        nodes: Vec<RawNode>,
+        nodes: Vec<Node>,
     }
     #[derive(serde::Deserialize)]
-    struct RawNode {
+    struct Node {
         matrix: Option<[f64; 16]>,
         translation: Option<[f64; 3]>,
         rotation: Option<[f64; 4]>,
         scale: Option<[f64; 3]>,
+        extensions: Option<Extensions>,
     }
-    let Some(root) =
-        json_bytes(bytes, is_glb).and_then(|j| serde_json::from_slice::<RawRoot>(j).ok())
+    #[derive(serde::Deserialize)]
+    struct Extensions {
+        #[serde(rename = "EXT_mesh_gpu_instancing")]
+        instancing: Option<InstancingExt>,
+    }
+    #[derive(serde::Deserialize)]
+    struct InstancingExt {
+        #[serde(default)]
+        attributes: Instancing,
+    }
+    let Some(root) = json_bytes(bytes, is_glb).and_then(|j| serde_json::from_slice::<Root>(j).ok())
     else {
         return Vec::new();
     };
     root.nodes
         .into_iter()
         .map(|n| {
-            let local = match n.matrix {
-                Some(m) => glam::DAffine3::from_mat4(glam::DMat4::from_cols_array(&m)),
+            let instancing = n
+                .extensions
+                .and_then(|e| e.instancing)
+                .map(|i| i.attributes);
+            let transform = match n.matrix {
+                Some(m) => Some(glam::DAffine3::from_mat4(glam::DMat4::from_cols_array(&m))),
                 None => {
                     let q = glam::DQuat::from_array(n.rotation.unwrap_or([0.0, 0.0, 0.0, 1.0]));
                     let length = q.length();
-                    if !(length.is_finite() && length > 0.0) {
-                        return None;
-                    }
-                    glam::DAffine3::from_scale_rotation_translation(
-                        glam::DVec3::from(n.scale.unwrap_or([1.0; 3])),
-                        q / length,
-                        glam::DVec3::from(n.translation.unwrap_or([0.0; 3])),
-                    )
+                    (length.is_finite() && length > 0.0).then(|| {
+                        glam::DAffine3::from_scale_rotation_translation(
+                            glam::DVec3::from(n.scale.unwrap_or([1.0; 3])),
+                            q / length,
+                            glam::DVec3::from(n.translation.unwrap_or([0.0; 3])),
+                        )
+                    })
                 }
             };
-            Some(local)
+            RawNode {
+                transform,
+                instancing,
+            }
         })
         .collect()
 }

@@ -5,10 +5,9 @@ use glam::{DAffine3, DVec3, Vec3};
 
 use crate::geometry::transform::Transform;
 use crate::io::desc::LightDesc;
-use crate::scene::camera::Camera;
+use crate::scene::camera::{Camera, Projection};
 use crate::scene::light::Light;
 
-use super::State;
 use super::materials::{check_color, check_factor};
 
 pub(super) fn convert_light(
@@ -52,7 +51,6 @@ pub(super) fn convert_light(
 }
 
 pub(super) fn convert_camera(
-    st: &mut State,
     camera: &gltf::Camera,
     node: &str,
     world: DAffine3,
@@ -61,13 +59,17 @@ pub(super) fn convert_camera(
         Some(name) => format!("camera {} ('{name}') at {node}", camera.index()),
         None => format!("camera {} at {node}", camera.index()),
     };
-    let yfov = match camera.projection() {
-        gltf::camera::Projection::Perspective(p) => p.yfov(),
-        gltf::camera::Projection::Orthographic(_) => {
-            st.warn(format!(
-                "{label} is orthographic; skipped (the renderer is pinhole only)"
-            ));
-            return Ok(None);
+    let (yfov, projection) = match camera.projection() {
+        gltf::camera::Projection::Perspective(p) => (p.yfov(), Projection::Perspective),
+        gltf::camera::Projection::Orthographic(o) => {
+            let half_height = o.ymag().abs();
+            if !(half_height.is_finite() && half_height > 0.0) {
+                return Err(format!(
+                    "{label}: orthographic ymag {} is not a positive number",
+                    o.ymag()
+                ));
+            }
+            (1.0, Projection::Orthographic { half_height })
         }
     };
     if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
@@ -86,7 +88,9 @@ pub(super) fn convert_camera(
         up,
         vfov_degrees: yfov.to_degrees(),
         shift: glam::Vec2::ZERO,
+        projection,
         name: camera.name().map(str::to_string),
+        ..Default::default()
     };
     result.validate().map_err(|e| format!("{label}: {e}"))?;
     Ok(Some(result))

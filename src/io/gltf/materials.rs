@@ -5,9 +5,9 @@
 use glam::Vec3;
 
 use crate::core::math::Color;
-use crate::scene::material::Material;
+use crate::scene::material::{Alpha, AlphaMode, Material, NormalMap};
 
-use super::textures::texture;
+use super::textures::{normal_texture, texture};
 use super::{Ctx, State};
 
 fn material_label(m: &gltf::Material) -> String {
@@ -53,7 +53,7 @@ pub(super) fn material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<
 fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Material, String> {
     let label = material_label(m);
     let pbr = m.pbr_metallic_roughness();
-    let [r, g, b, _alpha] = pbr.base_color_factor();
+    let [r, g, b, alpha_factor] = pbr.base_color_factor();
     let base = Vec3::new(r, g, b);
     check_color(base, "base colour factor", &label)?;
     let metallic = pbr.metallic_factor();
@@ -112,6 +112,35 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
         if let Some(mr) = material.metallic_roughness.as_mut() {
             mr.texture = Some(t);
         }
+    }
+    let alpha_mode = match m.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => None,
+        gltf::material::AlphaMode::Mask => {
+            let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+            check_factor(cutoff, "alpha cutoff", &label)?;
+            Some(AlphaMode::Mask { cutoff })
+        }
+        gltf::material::AlphaMode::Blend => Some(AlphaMode::Blend),
+    };
+    if let Some(mode) = alpha_mode {
+        check_factor(alpha_factor, "base colour alpha", &label)?;
+        material.alpha = Some(Alpha {
+            mode,
+            factor: alpha_factor.min(1.0),
+            // The base colour texture's alpha channel (itself, if any).
+            texture: material.base_color_texture.clone(),
+        });
+    }
+    if let Some(info) = m.normal_texture() {
+        let scale = info.scale();
+        if !scale.is_finite() {
+            return Err(format!("{label}: normal texture scale is not finite"));
+        }
+        let tex = normal_texture(ctx, st, &info, &label)?;
+        material.normal_map = Some(NormalMap {
+            texture: tex,
+            scale,
+        });
     }
     // The emissive texture only scales the emissive factor: skip decoding
     // it when the factor is zero.

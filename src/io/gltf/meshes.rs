@@ -9,7 +9,7 @@ use gltf::mesh::{Mode, Semantic};
 
 use crate::geometry::mesh::{MAX_COORDINATE, Mesh, MeshData, NormalMode};
 
-use super::accessors::{read_indices, read_vec2, read_vec3};
+use super::accessors::{read_indices, read_vec2, read_vec3, read_vec4};
 use super::{Ctx, State};
 
 /// The shared mesh of one primitive and the offset (object space, f64)
@@ -150,15 +150,25 @@ fn build_primitive(
         uvs,
         indices: triangles,
     };
-    Mesh::with_accel(
+    let mesh = Mesh::with_accel(
         label,
         data,
         normal_mode,
         st.quality.quality,
         st.quality.accel.unwrap_or_default(),
     )
-    .map(|m| Some((m, offset)))
-    .map_err(fail)
+    .map_err(fail)?;
+    // Tangents only for meshes whose material has a normal map.
+    let mesh = if primitive.material().normal_texture().is_some() {
+        let given = match primitive.get(&Semantic::Tangents) {
+            Some(a) => Some(read_vec4(ctx, &a).map_err(|e| fail(format!("TANGENT: {e}")))?),
+            None => None,
+        };
+        mesh.with_tangents(given).map_err(fail)?
+    } else {
+        mesh
+    };
+    Ok(Some((mesh, offset)))
 }
 
 /// Converts an index list of the given mode to triangles (glTF's vertex

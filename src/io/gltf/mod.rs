@@ -10,10 +10,15 @@
 //!   1024 levels, or a non-finite transform is an error naming the node.
 //!   Nodes whose world transform is not invertible (for example scaled to
 //!   zero, a common way to hide objects) are skipped with a warning.
+//!   `EXT_mesh_gpu_instancing` places a node's mesh once per instance
+//!   (per-instance `TRANSLATION`, `ROTATION`, `SCALE` applied before the
+//!   node's transform; counts must agree; at most 2^22 instances a node).
 //! * **Meshes.** Every triangle primitive becomes one [`Mesh`], built once
 //!   and shared ([`Arc`]) between the nodes that instance it. `POSITION`,
 //!   `NORMAL` (vertex normals give smooth shading, their absence flat
-//!   shading), `TEXCOORD_0` and the indices are read, including sparse and
+//!   shading), `TEXCOORD_0`, `TANGENT` (for normal maps; generated from
+//!   the texture coordinates when absent, see
+//!   [`Mesh::with_tangents`]) and the indices are read, including sparse and
 //!   quantized (normalized integer) accessors. Triangle strips and fans
 //!   are converted to triangle lists; point and line primitives are
 //!   skipped with one warning per file.
@@ -28,12 +33,20 @@
 //!   0 leaves a Lambertian surface).
 //!   Primitives without a material get the glTF default material (white,
 //!   metallic 1, roughness 1). `KHR_texture_transform` is honoured.
+//!   Normal maps (`normalTexture` with its scale, tangent space, green
+//!   "up") perturb the shading normal. `alphaMode` `MASK` (with
+//!   `alphaCutoff`) cuts the surface away where the base colour alpha
+//!   (factor times texture alpha) is below the cutoff, for every ray,
+//!   shadow rays included; `BLEND` lets rays through with probability
+//!   `1 - alpha` (stochastic transparency).
 //! * **Textures.** PNG and JPEG images (external files, data URIs or
 //!   buffer views) are decoded once per image into linear RGB
 //!   [`ImageTexture`]s; colour textures (base colour, emissive) are
 //!   converted from sRGB, data textures (metallic-roughness) are not.
 //!   8- and 16-bit grey, grey-alpha, RGB and RGBA images are accepted,
-//!   float images are taken as linear; alpha is dropped.
+//!   float images are taken as linear; alpha is kept for alpha modes.
+//!   Samplers: `wrapS`/`wrapT` (repeat, mirrored repeat, clamp to edge)
+//!   and nearest or linear filtering by `magFilter`.
 //! * **Lights** (`KHR_lights_punctual`): point and spot lights become
 //!   [`Light::Point`] / [`Light::Spot`] with intensity `color * intensity`
 //!   in candela, directional lights [`Light::Directional`] with illuminance
@@ -42,7 +55,11 @@
 //!   values are errors.
 //! * **Cameras.** Perspective cameras become [`Camera`]s looking along the
 //!   node's local `-Z` with `+Y` up and the file's vertical field of view,
-//!   in traversal order. The aspect ratio and clipping planes are ignored
+//!   in traversal order; orthographic ones are orthographic cameras of
+//!   half height `ymag` (`xmag` follows from the image's aspect ratio).
+//! * **Extensions.** An extension in `extensionsRequired` that Prism does
+//!   not read is an error naming it; one only in `extensionsUsed` is a
+//!   warning (its content is ignored). The aspect ratio and clipping planes are ignored
 //!   (the image size decides the aspect ratio).
 //!
 //! # Units
@@ -53,18 +70,15 @@
 //!
 //! # What is ignored
 //!
-//! Normal, occlusion, transmission, specular and other extension textures;
-//! alpha modes and alpha (everything is opaque); `doubleSided` (nothing is
+//! Occlusion, transmission, specular and other extension textures;
+//! `KHR_texture_transform` on normal textures; `doubleSided` (nothing is
 //! culled, so winding and negative-determinant transforms do not matter);
-//! `KHR_materials_volume` (thickness and attenuation); texture sampler
-//! settings (lookups are always bilinear with repeat wrapping);
+//! `KHR_materials_volume` (thickness and attenuation); minification
+//! filters (no mipmaps: the magnification filter is used);
 //! texture coordinate sets other than 0 (set 0 is used, with a warning);
 //! light `range` (lights fall off with the inverse square law forever);
-//! orthographic cameras (the renderer is pinhole only; skipped with a
-//! warning); animations, skins (skinned meshes render in their bind pose
-//! with the node's transform), morph targets (the base geometry is used)
-//! and `EXT_mesh_gpu_instancing` (the node is drawn once, with its own
-//! transform).
+//! animations, skins (skinned meshes render in their bind pose
+//! with the node's transform), morph targets (the base geometry is used).
 //!
 //! # Errors
 //!
@@ -80,6 +94,7 @@
 //! the `gltf` crate's importer.
 //!
 //! [`Camera`]: crate::scene::camera::Camera
+//! [`Mesh::with_tangents`]: crate::geometry::mesh::Mesh::with_tangents
 //! [`Light::Point`]: crate::scene::light::Light::Point
 //! [`Light::Spot`]: crate::scene::light::Light::Spot
 //! [`Light::Directional`]: crate::scene::light::Light::Directional
@@ -149,6 +164,11 @@ struct Ctx {
     /// `gltf` crate reads them as f32, which loses a translation of 1e5 +
     /// 0.3 to within 0.004); `None` when the JSON could not be re-read.
     node_transforms: Vec<Option<glam::DAffine3>>,
+    /// Each node's `EXT_mesh_gpu_instancing` attributes (empty when the
+    /// JSON could not be re-read).
+    node_instancing: Vec<Option<container::Instancing>>,
+    /// Warnings about optional extensions that are not read.
+    extension_warnings: Vec<String>,
 }
 
 /// A primitive's shared mesh and the object-space offset its vertices

@@ -8,6 +8,7 @@ use crate::geometry::mesh::{BuildOptions, MAX_COORDINATE, Mesh};
 use crate::geometry::transform::Transform;
 use crate::io::desc::{Geometry, ObjectDesc, SceneDesc};
 
+use super::accessors::{read_vec3, read_vec4};
 use super::lights_cameras::{convert_camera, convert_light};
 use super::materials::material;
 use super::meshes::{mesh_name, primitive_mesh};
@@ -133,6 +134,9 @@ pub(super) fn build_scene(
     quality: BuildOptions,
 ) -> Result<SceneDesc, String> {
     st.quality = quality;
+    for w in &ctx.extension_warnings {
+        st.warn(w.clone());
+    }
     let doc = &ctx.document;
     let nodes: Vec<gltf::Node> = doc.nodes().collect();
     check_cycles(&nodes)?;
@@ -199,12 +203,27 @@ fn visit_node(
 ) -> Result<(), String> {
     let transform = Transform(world);
     if let Some(mesh) = node.mesh() {
-        if transform.is_valid() {
+        // EXT_mesh_gpu_instancing: the mesh once per instance transform,
+        // each applied before the node's own.
+        let placements = match ctx.node_instancing.get(node.index()).copied().flatten() {
+            Some(attributes) => instance_transforms(ctx, attributes, label)?
+                .into_iter()
+                .map(|local| world * local)
+                .collect(),
+            None => vec![world],
+        };
+        for placement in placements {
+            if !Transform(placement).is_valid() {
+                st.warn(format!(
+                    "{label}: transform is not invertible (zero scale?); its mesh is skipped"
+                ));
+                continue;
+            }
             for primitive in mesh.primitives() {
                 let Some((geometry, offset)) = primitive_mesh(ctx, st, &mesh, &primitive)? else {
                     continue;
                 };
-                let world = world * DAffine3::from_translation(offset);
+                let world = placement * DAffine3::from_translation(offset);
                 let transform = Transform(world);
                 check_world_bounds(&geometry, &world, label)?;
                 let material = material(ctx, st, &primitive.material())?;
@@ -215,21 +234,97 @@ fn visit_node(
                     material,
                 });
             }
-        } else {
-            st.warn(format!(
-                "{label}: transform is not invertible (zero scale?); its mesh is skipped"
-            ));
         }
     }
     if let Some(light) = node.light() {
         scene.lights.push(convert_light(&light, label, transform)?);
     }
     if let Some(camera) = node.camera()
-        && let Some(c) = convert_camera(st, &camera, label, world)?
+        && let Some(c) = convert_camera(&camera, label, world)?
     {
         scene.cameras.push(c);
     }
     Ok(())
+}
+
+/// Most instances one node may ask for with `EXT_mesh_gpu_instancing`.
+const MAX_INSTANCES: usize = 1 << 22;
+
+/// The per-instance local transforms of a node's `EXT_mesh_gpu_instancing`
+/// attributes (translation, rotation, scale; each optional, all of the
+/// same count), checked: finite values, unit-length-able quaternions.
+fn instance_transforms(
+    ctx: &Ctx,
+    attributes: super::container::Instancing,
+    label: &str,
+) -> Result<Vec<DAffine3>, String> {
+    let accessor = |index: Option<usize>, what: &str| -> Result<Option<gltf::Accessor>, String> {
+        index
+            .map(|i| {
+                ctx.document.accessors().nth(i).ok_or_else(|| {
+                    format!(
+                        "{label}: EXT_mesh_gpu_instancing {what} refers to missing accessor {i}"
+                    )
+                })
+            })
+            .transpose()
+    };
+    let fail = |what: &str, e: String| format!("{label}: EXT_mesh_gpu_instancing {what}: {e}");
+    let translations = match accessor(attributes.translation, "TRANSLATION")? {
+        Some(a) => Some(read_vec3(ctx, &a).map_err(|e| fail("TRANSLATION", e))?),
+        None => None,
+    };
+    let rotations = match accessor(attributes.rotation, "ROTATION")? {
+        Some(a) => Some(read_vec4(ctx, &a).map_err(|e| fail("ROTATION", e))?),
+        None => None,
+    };
+    let scales = match accessor(attributes.scale, "SCALE")? {
+        Some(a) => Some(read_vec3(ctx, &a).map_err(|e| fail("SCALE", e))?),
+        None => None,
+    };
+    let counts: Vec<usize> = [
+        translations.as_ref().map(Vec::len),
+        rotations.as_ref().map(Vec::len),
+        scales.as_ref().map(Vec::len),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let Some(&count) = counts.first() else {
+        return Err(format!(
+            "{label}: EXT_mesh_gpu_instancing has no TRANSLATION, ROTATION or SCALE attribute"
+        ));
+    };
+    if counts.iter().any(|&c| c != count) {
+        return Err(format!(
+            "{label}: EXT_mesh_gpu_instancing attributes have different counts {counts:?}"
+        ));
+    }
+    if count > MAX_INSTANCES {
+        return Err(format!(
+            "{label}: EXT_mesh_gpu_instancing asks for {count} instances, more than {MAX_INSTANCES}"
+        ));
+    }
+    (0..count)
+        .map(|i| {
+            let t = translations.as_ref().map_or(Vec3::ZERO, |v| v[i]);
+            let r = rotations.as_ref().map_or(glam::Vec4::W, |v| v[i]);
+            let s = scales.as_ref().map_or(Vec3::ONE, |v| v[i]);
+            let q = Quat::from_vec4(r);
+            let length = q.length();
+            if !(t.is_finite() && s.is_finite() && length.is_finite() && length > 0.0) {
+                return Err(format!(
+                    "{label}: EXT_mesh_gpu_instancing instance {i} has a non-finite or invalid \
+                     transform (translation {t}, rotation {r}, scale {s})"
+                ));
+            }
+            Ok(DAffine3::from_scale_rotation_translation(
+                s.as_dvec3(),
+                (q / length).as_dquat(),
+                t.as_dvec3(),
+            ))
+        })
+        .collect()
 }
 
 /// Fails if a mesh placed by `world` reaches farther than

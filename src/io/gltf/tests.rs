@@ -369,7 +369,9 @@ fn textures_are_decoded_once_with_transform() {
     let m0 = &scene.objects[0].material;
     let m1 = &scene.objects[1].material;
     let image_of = |t: &Option<Texture>| match t {
-        Some(Texture::Image { image, transform }) => (image.clone(), *transform),
+        Some(Texture::Image {
+            image, transform, ..
+        }) => (image.clone(), *transform),
         other => panic!("expected an image texture, got {other:?}"),
     };
     let (base, transform) = image_of(&m0.base_color_texture);
@@ -697,14 +699,18 @@ fn invalid_numbers_are_errors() {
         "{message}"
     );
 
-    // Orthographic cameras and zero-scale nodes are skipped, not errors.
+    // Zero-scale nodes are skipped, not errors; orthographic cameras are
+    // read (see `orthographic_camera_is_read`), but not with ymag 0.
     let mut doc = quad_doc(embedded(QUAD));
-    doc["nodes"] = json!([{"camera": 0}, {"mesh": 0, "scale": [0, 0, 0]}]);
-    doc["scenes"] = json!([{"nodes": [0, 1]}]);
+    doc["nodes"] = json!([{"mesh": 0, "scale": [0, 0, 0]}]);
+    let scene = load(&write(dir.path(), "zero.gltf", &doc)).unwrap();
+    assert!(scene.objects.is_empty());
+    let mut doc = quad_doc(embedded(QUAD));
+    doc["nodes"] = json!([{"camera": 0}]);
     doc["cameras"] = json!([{"type": "orthographic",
-        "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.1, "zfar": 10}}]);
-    let scene = load(&write(dir.path(), "ortho.gltf", &doc)).unwrap();
-    assert!(scene.cameras.is_empty() && scene.objects.is_empty());
+        "orthographic": {"xmag": 1, "ymag": 0, "znear": 0.1, "zfar": 10}}]);
+    let message = error_of(&write(dir.path(), "ortho.gltf", &doc));
+    assert!(message.contains("ymag 0"), "{message}");
 }
 
 #[test]
@@ -770,4 +776,118 @@ fn samples_load() {
             _ => {}
         }
     }
+}
+
+/// An extension the file requires but Prism does not read is an error
+/// naming it; one it only uses is a warning, and the file loads; the
+/// extensions Prism reads may be required.
+#[test]
+fn required_and_optional_extensions() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc = quad_doc(embedded(QUAD));
+    doc["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
+    doc["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+    let e = error_of(&write(dir.path(), "required.gltf", &doc));
+    assert!(
+        e.contains("requires glTF extension KHR_draco_mesh_compression"),
+        "{e}"
+    );
+
+    let mut doc = quad_doc(embedded(QUAD));
+    doc["extensionsUsed"] = json!(["KHR_materials_clearcoat", "EXT_mesh_gpu_instancing"]);
+    doc["extensionsRequired"] = json!(["EXT_mesh_gpu_instancing"]);
+    let path = write(dir.path(), "optional.gltf", &doc);
+    assert_eq!(load(&path).unwrap().objects.len(), 1);
+    let bytes = std::fs::read(&path).unwrap();
+    let ctx = container::open(&bytes, &path).unwrap();
+    assert_eq!(
+        ctx.extension_warnings.len(),
+        1,
+        "{:?}",
+        ctx.extension_warnings
+    );
+    assert!(ctx.extension_warnings[0].contains("KHR_materials_clearcoat"));
+}
+
+/// `EXT_mesh_gpu_instancing` places the node's mesh once per instance:
+/// here the quad's own four vertex positions as translations, after a
+/// scale of 2 and a quarter turn about Z per instance (ROTATION and
+/// SCALE accessors), then the node's translation.
+#[test]
+fn gpu_instancing_places_each_instance() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut buffer = quad_buffer(QUAD);
+    // Extra data at 156: four rotations (VEC4) and four scales (VEC3).
+    let q = [
+        0.0f32,
+        0.0,
+        std::f32::consts::FRAC_1_SQRT_2,
+        std::f32::consts::FRAC_1_SQRT_2,
+    ];
+    for _ in 0..4 {
+        q.iter()
+            .for_each(|v| buffer.extend_from_slice(&v.to_le_bytes()));
+    }
+    for _ in 0..4 {
+        [2.0f32; 3]
+            .iter()
+            .for_each(|v| buffer.extend_from_slice(&v.to_le_bytes()));
+    }
+    let mut doc = quad_doc(json!({
+        "byteLength": buffer.len(),
+        "uri": format!("data:application/octet-stream;base64,{}", b64(&buffer))
+    }));
+    doc["bufferViews"].as_array_mut().unwrap().extend([
+        json!({"buffer": 0, "byteOffset": 156, "byteLength": 64}),
+        json!({"buffer": 0, "byteOffset": 220, "byteLength": 48}),
+    ]);
+    doc["accessors"].as_array_mut().unwrap().extend([
+        json!({"bufferView": 6, "componentType": 5126, "count": 4, "type": "VEC4"}),
+        json!({"bufferView": 7, "componentType": 5126, "count": 4, "type": "VEC3"}),
+    ]);
+    doc["extensionsUsed"] = json!(["EXT_mesh_gpu_instancing"]);
+    doc["nodes"][0]["translation"] = json!([10, 0, 0]);
+    doc["nodes"][0]["extensions"] = json!({"EXT_mesh_gpu_instancing": {"attributes": {
+        "TRANSLATION": 0, "ROTATION": 5, "SCALE": 6}}});
+    let scene = load(&write(dir.path(), "instanced.gltf", &doc)).unwrap();
+    assert_eq!(scene.objects.len(), 4);
+    let translations = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ];
+    for (o, t) in scene.objects.iter().zip(translations) {
+        let m = o.transform.0;
+        // The quad's vertex (1, 0, 0): scaled to (2, 0, 0), turned to
+        // (0, 2, 0), moved by the instance and then by the node.
+        let p = m.transform_point3(glam::DVec3::X);
+        let expect = glam::DVec3::new(10.0 + t[0], 2.0 + t[1], t[2]);
+        assert!((p - expect).length() < 1e-5, "{p} vs {expect}");
+    }
+    // Mismatched counts are an error naming the node.
+    doc["accessors"][5]["count"] = json!(3);
+    doc["bufferViews"][6]["byteLength"] = json!(48);
+    let e = error_of(&write(dir.path(), "mismatch.gltf", &doc));
+    assert!(
+        e.contains("node 0") && e.contains("different counts"),
+        "{e}"
+    );
+}
+
+/// Orthographic glTF cameras become orthographic cameras of half height
+/// `ymag`.
+#[test]
+fn orthographic_camera_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc = quad_doc(embedded(QUAD));
+    doc["cameras"] = json!([{"type": "orthographic",
+        "orthographic": {"xmag": 3, "ymag": 2, "znear": 0.1, "zfar": 100}}]);
+    doc["nodes"] = json!([{"mesh": 0}, {"camera": 0, "translation": [0, 0, 5]}]);
+    doc["scenes"] = json!([{"nodes": [0, 1]}]);
+    let scene = load(&write(dir.path(), "ortho.gltf", &doc)).unwrap();
+    assert_eq!(
+        scene.cameras[0].projection,
+        crate::scene::camera::Projection::Orthographic { half_height: 2.0 }
+    );
 }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use glam::{Vec2, Vec3};
 
 use crate::image::output::srgb_to_linear;
-use crate::scene::material::{ImageTexture, Texture, UvTransform};
+use crate::scene::material::{ImageTexture, Texture, TextureSampler, UvTransform, Wrap};
 
 use super::container::{read_uri, uri_label, view_bytes};
 use super::{Ctx, State};
@@ -102,10 +102,31 @@ fn to_texture(img: &image::DynamicImage, srgb: bool) -> Result<ImageTexture, Str
             return Err(format!("unsupported pixel format {:?}", other.color()));
         }
     };
+    // Alpha is kept only where there is some (cut-outs and transparency
+    // read it); it is linear in every format.
+    let alpha = if img.color().has_alpha() {
+        let a: Vec<f32> = img.to_rgba32f().pixels().map(|p| p.0[3]).collect();
+        if a.iter().all(|&x| x >= 1.0) {
+            Vec::new()
+        } else {
+            a.into_iter()
+                .map(|x| {
+                    if x.is_finite() {
+                        x.clamp(0.0, 1.0)
+                    } else {
+                        1.0
+                    }
+                })
+                .collect()
+        }
+    } else {
+        Vec::new()
+    };
     Ok(ImageTexture {
         width,
         height,
         texels,
+        alpha,
     })
 }
 
@@ -165,5 +186,53 @@ pub(super) fn texture(
     let image_index = info.texture().source().index();
     let image = image_texture(ctx, st, image_index, srgb)
         .map_err(|e| format!("{material}: {what}: {e}"))?;
-    Ok(Texture::Image { image, transform })
+    let sampler = texture_sampler(&info.texture().sampler());
+    Ok(Texture::Image {
+        image,
+        transform,
+        sampler,
+    })
+}
+
+/// The wrapping and filtering of a glTF sampler: each axis's wrap mode,
+/// and nearest or linear filtering as the magnification filter says
+/// (minification is handled by the same filter: textures are not
+/// mipmapped).
+pub(super) fn texture_sampler(s: &gltf::texture::Sampler) -> TextureSampler {
+    use gltf::texture::{MagFilter, WrappingMode};
+    let wrap = |w: WrappingMode| match w {
+        WrappingMode::Repeat => Wrap::Repeat,
+        WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+    };
+    TextureSampler {
+        wrap_u: wrap(s.wrap_s()),
+        wrap_v: wrap(s.wrap_t()),
+        linear: s.mag_filter() != Some(MagFilter::Nearest),
+    }
+}
+
+/// The [`Texture`] of a material's normal map (linear data; the `gltf`
+/// crate does not expose `KHR_texture_transform` on normal textures, so
+/// none is applied).
+pub(super) fn normal_texture(
+    ctx: &Ctx,
+    st: &mut State,
+    info: &gltf::material::NormalTexture,
+    material: &str,
+) -> Result<Texture, String> {
+    let set = info.tex_coord();
+    if set != 0 {
+        st.warn(format!(
+            "{material}: normal texture uses TEXCOORD_{set}; TEXCOORD_0 is used instead"
+        ));
+    }
+    let image_index = info.texture().source().index();
+    let image = image_texture(ctx, st, image_index, false)
+        .map_err(|e| format!("{material}: normal texture: {e}"))?;
+    Ok(Texture::Image {
+        image,
+        transform: UvTransform::default(),
+        sampler: texture_sampler(&info.texture().sampler()),
+    })
 }

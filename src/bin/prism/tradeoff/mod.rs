@@ -26,7 +26,7 @@ use prism::io::desc::{SceneDesc, SettingsDesc};
 use prism::systems::{self, RenderConfig};
 
 use crate::args::{
-    FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, SeedFlag, ThreadsFlag,
+    FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, PhotonFlags, SeedFlag, ThreadsFlag,
 };
 
 pub(crate) mod plot;
@@ -76,7 +76,8 @@ pub struct TradeoffArgs {
     /// reference's samples are independent of the sweep's].
     #[arg(long)]
     pub reference_seed: Option<u64>,
-    /// Knobs to sweep, comma-separated [default: all].
+    /// Knobs to sweep, comma-separated [default: all but
+    /// photon-iterations, whose renders are long].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub knobs: Vec<Knob>,
     /// `--width`, `--height`, `--spp`, `--max-depth`.
@@ -91,6 +92,10 @@ pub struct TradeoffArgs {
     /// `--seed`.
     #[command(flatten)]
     pub seed: SeedFlag,
+    /// Photon mapping's settings for the renders that use it (the
+    /// `transport` and `photon-iterations` knobs).
+    #[command(flatten)]
+    pub photon: PhotonFlags,
     /// `--integrator`.
     #[command(flatten)]
     pub integrator: IntegratorFlag,
@@ -125,18 +130,21 @@ pub enum Knob {
     RussianRoulette,
     /// BVH build preset, fastest to very slow (the scene is reloaded).
     Bvh,
-    /// Light transport: Whitted against path tracing.
+    /// Light transport: Whitted, path tracing, photon mapping.
     Transport,
     /// Random numbers: Owen-scrambled Sobol against independent hashes.
     Sampler,
     /// Structure over mesh triangles: bvh, kdtree, grid (the scene is
     /// reloaded; the image is the same, only the time changes).
     Accel,
+    /// Photon mapping's iterations (photon transport): 1, 2, 4, 8, 16, 32,
+    /// 64; the error should fall as they grow.
+    PhotonIterations,
 }
 
 impl Knob {
     /// Every knob, in sweep order.
-    pub const ALL: [Knob; 9] = [
+    pub const ALL: [Knob; 10] = [
         Knob::Spp,
         Knob::MaxDepth,
         Knob::MinContribution,
@@ -146,6 +154,7 @@ impl Knob {
         Knob::Transport,
         Knob::Sampler,
         Knob::Accel,
+        Knob::PhotonIterations,
     ];
 
     /// Name as written in the CSV and on the command line.
@@ -160,6 +169,7 @@ impl Knob {
             Knob::Transport => "transport",
             Knob::Sampler => "sampler",
             Knob::Accel => "accel",
+            Knob::PhotonIterations => "photon-iterations",
         }
     }
 }
@@ -184,7 +194,8 @@ const BVH_VALUES: [BuildQuality; 6] = [
 /// Structures over mesh triangles swept by the `accel` knob (brute force
 /// is left out: hours on any real mesh).
 const ACCEL_VALUES: [Accel; 3] = [Accel::Bvh, Accel::Kdtree, Accel::Grid];
-const TRANSPORT_VALUES: [Transport; 2] = [Transport::Whitted, Transport::Path];
+const TRANSPORT_VALUES: [Transport; 3] = [Transport::Whitted, Transport::Path, Transport::Photon];
+const PHOTON_ITERATION_VALUES: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
 const SAMPLER_VALUES: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Hash];
 
 /// The name of a BVH preset, as on `prism render --bvh-quality`.
@@ -246,6 +257,10 @@ impl Knob {
                 .map(|v| v.name().to_string())
                 .collect(),
             Knob::Accel => ACCEL_VALUES.iter().map(|v| v.name().to_string()).collect(),
+            Knob::PhotonIterations => PHOTON_ITERATION_VALUES
+                .iter()
+                .map(|v| v.to_string())
+                .collect(),
             Knob::Sampler => SAMPLER_VALUES
                 .iter()
                 .map(|v| v.name().to_string())
@@ -266,6 +281,10 @@ impl Knob {
             Knob::Accel => c.accel = ACCEL_VALUES[i],
             Knob::Transport => s.transport = TRANSPORT_VALUES[i],
             Knob::Sampler => s.sampler = SAMPLER_VALUES[i],
+            Knob::PhotonIterations => {
+                s.transport = Transport::Photon;
+                s.photon.iterations = PHOTON_ITERATION_VALUES[i];
+            }
         }
     }
 
@@ -282,6 +301,10 @@ impl Knob {
             Knob::Accel => c.accel.name().to_string(),
             Knob::Transport => s.transport.name().to_string(),
             Knob::Sampler => s.sampler.name().to_string(),
+            Knob::PhotonIterations => match s.transport {
+                Transport::Photon => s.photon.iterations.to_string(),
+                _ => "-".to_string(),
+            },
         }
     }
 
@@ -418,7 +441,10 @@ pub fn run(args: TradeoffArgs) -> Result<()> {
 fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     let integrator = args.integrator.kind();
     let knobs: Vec<Knob> = if args.knobs.is_empty() {
-        Knob::ALL.to_vec()
+        Knob::ALL
+            .into_iter()
+            .filter(|&k| k != Knob::PhotonIterations)
+            .collect()
     } else {
         let mut k: Vec<Knob> = Vec::new();
         for &x in &args.knobs {
@@ -441,6 +467,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         light_samples: args.path.light_samples,
         rr_start_depth: args.path.rr_depth.map(Some),
         sampler: args.path.sampler(),
+        photon: args.photon.overrides(),
         ..args.frame.desc()
     }
     .resolve(&base_desc.settings);
@@ -517,7 +544,14 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
     }
 
     // Progress in sample-rows: each render adds height x spp per run.
-    let work = |c: &Config| c.settings.height as u64 * c.settings.spp as u64 * args.runs as u64;
+    let work = |c: &Config| {
+        let passes = match c.settings.transport {
+            // Photon and camera passes of every iteration.
+            Transport::Photon => 2 * c.settings.photon.iterations as u64,
+            _ => 1,
+        };
+        c.settings.height as u64 * c.settings.spp as u64 * passes * args.runs as u64
+    };
     let mut total: u64 = planned.iter().map(|p| work(&p.config)).sum();
     if given_reference.is_none() {
         total += reference_config.settings.height as u64 * reference_config.settings.spp as u64;
@@ -663,7 +697,8 @@ mod tests {
         assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
         assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
         assert_eq!(count("accel"), ACCEL_VALUES.len() - 1);
-        assert_eq!(count("transport"), 1);
+        assert_eq!(count("transport"), 2);
+        assert_eq!(count("photon-iterations"), PHOTON_ITERATION_VALUES.len());
         assert_eq!(count("sampler"), 1);
         for x in &p[1..] {
             let mut c = x.config.clone();
@@ -678,6 +713,10 @@ mod tests {
                 "accel" => c.accel = base.accel,
                 "transport" => c.settings.transport = base.settings.transport,
                 "sampler" => c.settings.sampler = base.settings.sampler,
+                "photon-iterations" => {
+                    c.settings.transport = base.settings.transport;
+                    c.settings.photon.iterations = base.settings.photon.iterations;
+                }
                 k => panic!("unexpected knob {k}"),
             }
             assert_eq!(c, base, "{} {}", x.knob, x.value);
