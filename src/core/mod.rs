@@ -4,6 +4,7 @@
 //! and the render settings with their limits. Imports nothing of the crate.
 
 pub mod clip;
+pub mod counters;
 pub mod error;
 pub mod math;
 pub mod microfacet;

@@ -1,7 +1,9 @@
 //! Integrators: turn a [`RenderScene`] and a
 //! camera into a [`Film`](crate::image::film::Film).
 
-pub mod counters;
+/// The ray and sample counters, kept in `core` so transport kernels can fill
+/// them; re-exported here where integrators and their callers name them.
+pub use crate::core::counters;
 pub mod lines;
 pub mod overlay;
 pub mod photon;

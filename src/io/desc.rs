@@ -176,15 +176,20 @@ impl SceneDesc {
     }
 
     /// True when the scene is lit under `transport`: it has a punctual
-    /// light, or (path transport only, where emissive surfaces are area
-    /// lights) an emissive surface.
+    /// light; or, under path and photon transport (where emissive surfaces
+    /// are area lights and emit photons), an emissive surface; or, under
+    /// path transport (the only one that samples it as a light), an
+    /// environment.
     pub fn is_lit(&self, transport: crate::core::settings::Transport) -> bool {
+        use crate::core::settings::Transport;
+        let emissive = || {
+            self.objects
+                .iter()
+                .any(|o| o.material.emission.max_element() > 0.0)
+        };
         !self.lights.is_empty()
-            || (transport == crate::core::settings::Transport::Path
-                && self
-                    .objects
-                    .iter()
-                    .any(|o| o.material.emission.max_element() > 0.0))
+            || (matches!(transport, Transport::Path | Transport::Photon) && emissive())
+            || (transport == Transport::Path && self.environment.is_some())
     }
 
     /// Gives a scene without a camera one, the way glTF viewers show a

@@ -618,6 +618,8 @@ fn overlay_image_and_svg_are_written_whole() {
     assert_success(&o);
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.contains(r#"class="triangle visible""#) && !text.contains("triangle hidden"));
+}
+
 /// Bad environment maps and options, given with `--env` or in a scene's
 /// `[environment]`: a clear error naming the problem, no output file.
 #[test]
@@ -715,6 +717,8 @@ fn the_sample_environment_map_renders() {
     let img = image::open(&out_file).unwrap().to_rgb32f();
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
     assert!(img.pixels().any(|p| p.0[1] > 0.1));
+}
+
 /// Photon transport's options reject bad values with a clear message, and
 /// the wavefront integrator says it does not run photon transport.
 #[test]
@@ -766,5 +770,12 @@ fn photon_options_reject_bad_input_cleanly() {
         "[settings]\ntransport = \"photon\"\n[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
     )
     .unwrap();
-    assert_clean_failure(&render(&dark, &out, &[]), &out, &["needs a light"]);
+    // It gets the default key light, like any unlit scene, and renders.
+    let o = render(&dark, &out, &[]);
+    assert_success(&o);
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("adding a white directional key light"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

@@ -530,3 +530,47 @@ fn normal_maps_shade_like_the_geometry_they_replace() {
         }
     }
 }
+
+/// Which scenes count as lit decides whether the default key light is
+/// added: punctual lights light every transport; emissive surfaces light
+/// path and photon transport (they are area lights and photon sources
+/// there); an environment lights path transport only (the only one that
+/// samples it). A model shown with `--env` under path transport must not
+/// get a key light on top of the environment.
+#[test]
+fn the_key_light_is_added_only_where_nothing_lights_the_scene() {
+    use prism::core::settings::Transport::{Path, Photon, Whitted};
+    use prism::scene::environment::{Environment, EnvironmentSource};
+    let scene = |extra: &str| {
+        load_toml(&format!(
+            "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nshape = {{ type = \"sphere\", radius = 1.0 }}\n{extra}"
+        ))
+        .unwrap()
+    };
+    let bare = scene("");
+    let emissive = scene(
+        "[[objects]]\nshape = { type = \"sphere\", radius = 0.2 }\nmaterial = { emission = [1, 1, 1] }\n",
+    );
+    let mut env = scene("");
+    env.environment = Some(Environment::new(
+        EnvironmentSource::Uniform(Color::splat(1.0)),
+        1.0,
+        0.0,
+    ));
+    let point = scene("[[lights]]\ntype = \"point\"\nposition = [0, 3, 3]\nintensity = 5\n");
+    for (name, desc, lit) in [
+        ("bare", &bare, [false, false, false]),
+        ("emissive", &emissive, [false, true, true]),
+        ("environment", &env, [false, true, false]),
+        ("point light", &point, [true, true, true]),
+    ] {
+        for (t, want) in [Whitted, Path, Photon].into_iter().zip(lit) {
+            assert_eq!(desc.is_lit(t), want, "{name} under {t:?}");
+            let mut d = desc.clone();
+            let camera = d.cameras[0].clone();
+            let added = d.ensure_light(&camera, t).is_some();
+            assert_eq!(added, !want, "{name} under {t:?}");
+            assert_eq!(d.lights.len(), desc.lights.len() + added as usize);
+        }
+    }
+}

@@ -26,7 +26,7 @@ mod vector;
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene file (.toml, .gltf or .glb) to an image (.png or .exr).
-    Render(render::RenderArgs),
+    Render(Box<render::RenderArgs>),
     /// Compare the recursive and the wavefront integrator on scenes: run
     /// both alternately and report median times, rays, Mrays/s, queue
     /// memory, wavefront stage times, the speedup, and closest-hit
@@ -55,7 +55,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => render::run(args),
+        Command::Render(args) => render::run(*args),
         Command::Bench(args) => bench::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Tradeoff(args) => tradeoff::run(args),

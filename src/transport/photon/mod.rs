@@ -56,10 +56,10 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 
+use crate::core::counters::RenderCounters;
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::RenderSettings;
-use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::transport::interaction::{Interaction, RayKind, brdf};
 use crate::transport::path::{self, LobeChoice, sample_bsdf};
