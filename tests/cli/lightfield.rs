@@ -60,7 +60,8 @@ fn synth(dir: &Path, extra: &[&str], out: &Path) -> std::process::Output {
 
 /// The scene file's rig is used, every view written, and `render
 /// --grid-camera` reproduces a captured image bit for bit from the folder
-/// alone; `compare` of that view against the direct render reports an
+/// alone (asked for by `--grid-camera` or as `--grid-position`);
+/// `compare` of that view against the direct render reports an
 /// error of zero (the capture and the reference are rendered alike).
 #[test]
 fn capture_then_render_a_grid_view() {
@@ -83,6 +84,16 @@ fn capture_then_render_a_grid_view() {
     assert_eq!((a.width, a.height), (12, 8));
     assert!(
         a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits))
+    );
+    // The same camera asked for by its (whole) grid position.
+    let out2 = tmp.path().join("v2.exr");
+    assert_success(&synth(&lf, &["--grid-position", "2,1"], &out2));
+    let c = read_image(&out2).unwrap();
+    assert!(
+        c.pixels
             .iter()
             .zip(&b.pixels)
             .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits))

@@ -342,7 +342,7 @@ struct ViewFlags {
         value_delimiter = ',',
         allow_hyphen_values = true,
         num_args = 1,
-        required_unless_present = "grid_camera"
+        required_unless_present_any = ["grid_camera", "grid_position"]
     )]
     look_from: Option<Vec<f64>>,
     /// Point the view looks at, X,Y,Z [default: straight ahead along the
@@ -376,9 +376,21 @@ struct ViewFlags {
         value_name = "C,R",
         value_delimiter = ',',
         num_args = 1,
-        conflicts_with = "look_from"
+        conflicts_with_all = ["look_from", "grid_position"]
     )]
     grid_camera: Option<Vec<u32>>,
+    /// A camera like the grid's at continuous grid position U,V (column,
+    /// row; 0..C-1 and 0..R-1 span the grid), framing the focal window:
+    /// a view between grid cameras.
+    #[arg(
+        long,
+        value_name = "U,V",
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        conflicts_with = "look_from"
+    )]
+    grid_position: Option<Vec<f64>>,
     /// Image width [default: the light field's].
     #[arg(long)]
     width: Option<u32>,
@@ -428,6 +440,23 @@ impl ViewFlags {
                 )));
             }
             rig.camera(c, r)
+        } else if let Some(g) = &self.grid_position {
+            let [u, v] = <[f64; 2]>::try_from(g.as_slice()).map_err(|_| {
+                Error::Invalid(format!(
+                    "--grid-position takes U,V, got {} numbers",
+                    g.len()
+                ))
+            })?;
+            if !(u.is_finite() && v.is_finite()) {
+                return Err(Error::Invalid(format!(
+                    "--grid-position must be finite, got {u},{v}"
+                )));
+            }
+            let (cu, cv) = (
+                (rig.grid[0] as f64 - 1.0) * 0.5,
+                (rig.grid[1] as f64 - 1.0) * 0.5,
+            );
+            rig.camera_at((u - cu) * rig.spacing, (cv - v) * rig.spacing)
         } else {
             let from = DVec3::from(three(
                 "look-from",

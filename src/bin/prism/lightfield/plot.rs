@@ -43,6 +43,7 @@ fn panel<DB: DrawingBackend>(
     rows: &[SweepRow],
     x: impl Fn(&SweepRow) -> f64,
     x_desc: &str,
+    x_format: &dyn Fn(&f64) -> String,
     text: bool,
 ) -> std::result::Result<(), String>
 where
@@ -66,7 +67,7 @@ where
             .y_desc("relative MSE against direct renders")
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
-            .x_label_formatter(&|v| format!("{v:.3}"))
+            .x_label_formatter(x_format)
             .y_label_formatter(&|v| format!("{v:.1e}"));
     } else {
         mesh.x_labels(0).y_labels(0);
@@ -142,6 +143,7 @@ where
         rows,
         |r| r.grid as f64,
         "cameras per side of the grid (log scale)",
+        &|v| format!("{v:.0}"),
         text,
     )?;
     panel(
@@ -149,6 +151,7 @@ where
         rows,
         |r| r.capture_seconds,
         "capture time, s (log scale)",
+        &|v| format!("{v:.2}"),
         text,
     )?;
     root.present().map_err(e)?;
