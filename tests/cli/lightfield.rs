@@ -178,3 +178,55 @@ fn bad_light_fields_are_refused() {
     std::fs::remove_file(&img).unwrap();
     fails(&lf, &view, "is missing");
 }
+
+/// `prism lightfield sweep` on a tiny scene: one CSV row per grid and
+/// method, errors that fall with density, and the plot written; bad
+/// grids refused.
+#[test]
+fn sweep_writes_csv_and_plot() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scenes::write(tmp.path(), "lf.toml", SCENE);
+    let out = tmp.path().join("sweep");
+    let o = prism()
+        .args(["lightfield", "sweep"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--grids",
+            "2,3,5",
+            "--resolution",
+            "24x16",
+            "--aperture",
+            "0.8",
+        ])
+        .args(["--proxy-depth", "4.5", "--views", "2", "-q"])
+        .output()
+        .unwrap();
+    assert_success(&o);
+    let csv = std::fs::read_to_string(out.join("lightfield_sweep.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 6, "{csv}");
+    let rel: Vec<f64> = rows
+        .iter()
+        .filter(|r| r[0] == "quadrilinear")
+        .map(|r| r[7].parse().unwrap())
+        .collect();
+    assert!(rel[0] > rel[1] && rel[1] > rel[2], "{csv}");
+    assert!(out.join("lightfield_sweep.png").is_file());
+    assert!(out.join("lightfield_sweep.svg").is_file());
+    let o = prism()
+        .args(["lightfield", "sweep"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .args(["--grids", "1,3"])
+        .output()
+        .unwrap();
+    let e = assert_failed_without_panic(&o);
+    assert!(e.contains("at least 2"), "{e}");
+}
