@@ -31,8 +31,8 @@ pub mod geometry;
 pub mod image;
 pub mod integrators;
 pub mod io;
-pub mod radiosity;
 pub mod lightfield;
+pub mod radiosity;
 pub mod scene;
 pub mod transport;
 

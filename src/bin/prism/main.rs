@@ -15,8 +15,8 @@ struct Cli {
 mod args;
 mod bench;
 mod compare;
-mod radiosity_args;
 mod lightfield;
+mod radiosity_args;
 mod rays;
 mod render;
 mod shard;
