@@ -32,6 +32,7 @@
 pub mod components;
 pub mod demo;
 pub mod frame;
+pub mod lightfield;
 pub mod lines;
 pub mod radiosity;
 pub mod render;

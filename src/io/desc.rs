@@ -83,6 +83,12 @@ pub struct SettingsDesc {
     pub sampler: Option<crate::core::rng::SamplerKind>,
     /// Radiosity's options (each optional).
     pub radiosity: crate::core::radiosity::RadiosityDesc,
+    /// Camera projection: `Some(None)` is the perspective camera,
+    /// `Some(Some(p))` a panorama.
+    pub panorama: Option<Option<crate::core::settings::Panorama>>,
+    /// The light-field capture rig (`[lightfield]`), for `prism lightfield
+    /// capture`; not part of [`SettingsDesc::resolve`].
+    pub lightfield: Option<crate::core::settings::LightFieldSettings>,
     /// Photon mapping's parameters, each optional.
     pub photon: crate::core::photon_settings::PhotonOverrides,
 }
@@ -117,6 +123,7 @@ impl SettingsDesc {
             lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
             radiosity: self.radiosity.resolve(&under.radiosity),
+            panorama: self.panorama.or(under.panorama).unwrap_or(d.panorama),
             photon: self.photon.or(under.photon).resolve(),
         }
     }

@@ -28,6 +28,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("io", 4),
     ("radiosity", 4),
     ("integrators", 5),
+    ("lightfield", 5),
     ("systems", 6),
 ];
 

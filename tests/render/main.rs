@@ -24,6 +24,11 @@
 //!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
 //!   closed form, feature lines and their vector (SVG) form;
+//! * `cargo test --test render panorama::` — equirectangular and cube-map
+//!   panoramas read back as environments, and against each other;
+//! * `cargo test --test render lightfield::` — views synthesised from
+//!   captured light fields against the captures and direct renders, and
+//!   bad light fields refused;
 //! * `cargo test --test render overlay::` — the structure overlays
 //!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
 //!   clipping and visibility against independent f64 and brute-force
@@ -36,8 +41,10 @@ mod analytic;
 mod environment;
 mod illustration;
 mod large_worlds;
+mod lightfield;
 mod models;
 mod overlay;
+mod panorama;
 mod path;
 mod photon;
 mod radiosity;

@@ -186,6 +186,9 @@ pub struct RenderArgs {
     /// scene file's own camera first, then those of included glTF files).
     #[arg(long, default_value_t = 0)]
     camera: usize,
+    /// `--camera-projection`.
+    #[command(flatten)]
+    projection: crate::args::ProjectionFlag,
     /// `--look-from`, `--look-at`, `--fov` and the lens.
     #[command(flatten)]
     view: ViewFlags,
@@ -587,6 +590,7 @@ fn render_with_pool(
         light_samples: args.path.light_samples,
         sampler: args.path.sampler(),
         radiosity: args.radiosity.desc(),
+        panorama: args.projection.get(),
         photon: args.photon.overrides(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
@@ -625,6 +629,13 @@ fn render_with_pool(
         return Err(Error::Invalid(format!(
             "--camera {}: the scene has {camera_count} camera(s), numbered from 0",
             args.camera
+        )));
+    }
+    if let (Some(p), Some(_)) = (settings.panorama, &args.lines_svg) {
+        return Err(Error::Invalid(format!(
+            "--lines-svg projects onto the perspective camera's image; it does not combine \
+             with the {} panorama",
+            p.name()
         )));
     }
     args.view.apply(&mut desc.cameras[args.camera])?;

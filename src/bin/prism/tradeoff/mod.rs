@@ -29,7 +29,7 @@ use crate::args::{
     FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, PhotonFlags, SeedFlag, ThreadsFlag,
 };
 
-mod plot;
+pub(crate) mod plot;
 
 /// Options of `prism tradeoff`.
 ///
