@@ -32,6 +32,7 @@ pub mod image;
 pub mod integrators;
 pub mod io;
 pub mod lightfield;
+pub mod radiosity;
 pub mod scene;
 pub mod transport;
 

@@ -48,6 +48,8 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// Radiosity's options (used by [`Transport::Radiosity`] only).
+    pub radiosity: crate::core::radiosity::RadiositySettings,
     /// Photon mapping's parameters (used by [`Transport::Photon`] only).
     pub photon: crate::core::photon_settings::PhotonSettings,
     /// A panoramic camera instead of the perspective one (`None`): every
@@ -295,6 +297,9 @@ pub enum Transport {
     /// multiple importance sampling: emissive surfaces are area lights,
     /// diffuse surfaces scatter light onwards.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once
+    /// per scene and looked up by view rays (see [`crate::radiosity`]).
+    Radiosity,
     /// Progressive photon mapping: photons traced from the lights into a
     /// caustic and a global map each iteration, read by the camera side
     /// at diffuse and glossy surfaces (see [`crate::transport::photon`]).
@@ -307,6 +312,7 @@ impl Transport {
         match self {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
+            Transport::Radiosity => "radiosity",
             Transport::Photon => "photon",
         }
     }
@@ -372,6 +378,7 @@ impl Default for RenderSettings {
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
             panorama: None,
+            radiosity: Default::default(),
             photon: Default::default(),
         }
     }
@@ -470,6 +477,12 @@ impl RenderSettings {
                      with the {} panorama",
                     p.name()
                 ));
+            }
+        }
+        if self.transport == Transport::Radiosity {
+            self.radiosity.validate()?;
+            if self.window.is_some() {
+                return Err("radiosity renders whole images: it takes no render window".into());
             }
         }
         if self.transport == Transport::Photon {

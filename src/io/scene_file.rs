@@ -93,6 +93,8 @@ struct FileSettings {
     sampler: Option<FileSampler>,
     /// `"perspective"`, `"equirect"` or `"cubemap"`.
     camera_projection: Option<FileProjection>,
+    /// Radiosity's options (`[settings.radiosity]`).
+    radiosity: Option<crate::core::radiosity::RadiosityDesc>,
     /// Photon mapping (each optional).
     photon: Option<FilePhoton>,
 }
@@ -151,6 +153,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Radiosity,
     Photon,
 }
 
@@ -603,6 +606,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Radiosity => crate::core::settings::Transport::Radiosity,
                 FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
@@ -628,6 +632,7 @@ impl Ctx<'_> {
                 FileProjection::Cubemap => Some(crate::core::settings::Panorama::Cubemap),
             }),
             lightfield: None,
+            radiosity: s.radiosity.unwrap_or_default(),
         })
     }
 

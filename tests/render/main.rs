@@ -11,6 +11,9 @@
 //!   answers (white furnace, area lights) and the Whitted tracer;
 //! * `cargo test --test render photon::` — photon transport against the
 //!   path tracer (Cornell box) and bit for bit across thread counts;
+//! * `cargo test --test render radiosity::` — radiosity transport: the
+//!   Cornell box against the path tracer, the solution reused while the
+//!   camera moves, thread-count independence, refused input;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -44,6 +47,7 @@ mod overlay;
 mod panorama;
 mod path;
 mod photon;
+mod radiosity;
 mod robustness;
 mod scene_updates;
 mod shards;

@@ -16,6 +16,7 @@ mod args;
 mod bench;
 mod compare;
 mod lightfield;
+mod radiosity_args;
 mod rays;
 mod render;
 mod shard;
