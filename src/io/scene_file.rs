@@ -15,6 +15,7 @@ use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
+use crate::core::optics;
 use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
@@ -213,6 +214,11 @@ struct FileMaterial {
     transmission: Option<f32>,
     ior: Option<f32>,
     emission: Option<FileColor>,
+    /// Absorption coefficient of the interior (sigma_a, per unit length).
+    absorption: Option<FileColor>,
+    /// Colour left after `attenuation_distance` inside (the artist's form).
+    attenuation_color: Option<FileColor>,
+    attenuation_distance: Option<f32>,
 }
 
 #[derive(Deserialize)]
@@ -420,6 +426,23 @@ fn non_negative(what: &str, c: Color) -> std::result::Result<Color, String> {
         Ok(c)
     } else {
         Err(format!("{what} must be finite and non-negative, got {c}"))
+    }
+}
+
+/// The interior's absorption coefficient: `absorption` (sigma_a) or
+/// `attenuation_color` with `attenuation_distance`, not both.
+fn absorption(m: &FileMaterial) -> std::result::Result<Color, String> {
+    match (m.absorption, m.attenuation_color, m.attenuation_distance) {
+        (None, None, None) => Ok(Color::ZERO),
+        (Some(a), None, None) => optics::check_absorption(a.get()),
+        (None, Some(c), Some(d)) => optics::absorption_from_attenuation(c.get(), d),
+        (None, _, _) => Err(
+            "attenuation_color and attenuation_distance must be given together".to_string(),
+        ),
+        (Some(_), _, _) => Err(
+            "give either absorption (sigma_a) or attenuation_color with attenuation_distance, not both"
+                .to_string(),
+        ),
     }
 }
 
@@ -714,6 +737,7 @@ impl Ctx<'_> {
             transmission: unit_interval("transmission", m.transmission.unwrap_or(0.0))?,
             ior,
             emission: color(m.emission, d.emission, "emission")?,
+            absorption: absorption(m)?,
             ..d
         })
     }

@@ -11,6 +11,8 @@
 //!   answers (white furnace, area lights) and the Whitted tracer;
 //! * `cargo test --test render photon::` — photon transport against the
 //!   path tracer (Cornell box) and bit for bit across thread counts;
+//! * `cargo test --test render media::` — absorbing interiors (Beer-Lambert)
+//!   from TOML and glTF `KHR_materials_volume` in every transport;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -33,6 +35,7 @@ mod analytic;
 mod environment;
 mod illustration;
 mod large_worlds;
+mod media;
 mod models;
 mod overlay;
 mod path;

@@ -179,6 +179,7 @@ fn glass(ior: f32) -> SurfaceSample {
         transmission: 1.0,
         transmission_tint: Color::ONE,
         ior,
+        absorption: Color::ZERO,
         emission: Color::ZERO,
         base: Color::ONE,
         diffuse_weight: 0.0,

@@ -26,6 +26,7 @@ use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
+use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -171,8 +172,13 @@ fn shade_hits(
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         for i in range {
-            let h = hits.get(i);
+            let mut h = hits.get(i);
             let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+            // A segment that ran through an absorbing interior carries its
+            // transmittance to everything seen at its end.
+            if let Some(tr) = interior_transmittance(&it, h.distance) {
+                h.throughput *= tr;
+            }
             kernel(&h, &it, out);
         }
     });
