@@ -13,4 +13,5 @@ pub mod photon_settings;
 pub mod rng;
 pub mod sampling;
 pub mod settings;
+pub mod spectrum;
 pub mod window;
