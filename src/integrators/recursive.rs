@@ -77,6 +77,21 @@ pub fn trace_path(
     sampler: &mut Sampler,
     counters: &mut RenderCounters,
 ) -> Color {
+    let lambda = path::path_wavelength(scene, settings, sampler);
+    let l = trace_path_at(scene, settings, camera_ray, sampler, lambda, counters);
+    path::weigh_wavelength(l, lambda)
+}
+
+/// [`trace_path`] at wavelength `lambda` (spectral mode) or in RGB
+/// (`None`), without the film weight of the wavelength.
+fn trace_path_at(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    sampler: &mut Sampler,
+    lambda: Option<f32>,
+    counters: &mut RenderCounters,
+) -> Color {
     let mut radiance = Color::ZERO;
     let mut throughput = Color::ONE;
     let mut ray = *camera_ray;
@@ -87,7 +102,8 @@ pub fn trace_path(
             radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
             return radiance;
         };
-        let it = Interaction::new(scene, &ray, &hit);
+        let mut it = Interaction::new(scene, &ray, &hit);
+        path::at_wavelength(&mut it, lambda);
         let distance = hit.t * ray.direction.length();
         if let Some(tr) = interior_transmittance(&it, distance) {
             throughput *= tr;

@@ -16,6 +16,7 @@ use serde::Deserialize;
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
 use crate::core::optics;
+use crate::core::spectrum::{Dispersion, LAMBDA_D, Sellmeier};
 use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
@@ -219,6 +220,23 @@ struct FileMaterial {
     /// Colour left after `attenuation_distance` inside (the artist's form).
     attenuation_color: Option<FileColor>,
     attenuation_distance: Option<f32>,
+    /// Dispersion by Sellmeier's equation: a preset name or coefficients.
+    sellmeier: Option<FileSellmeier>,
+    /// Dispersion by an Abbe number (Cauchy's law through `ior`).
+    abbe: Option<f32>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum FileSellmeierCoefficients {
+    Coefficients { b: [f64; 3], c: [f64; 3] },
+}
+
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+enum FileSellmeier {
+    Preset(String),
+    Custom(FileSellmeierCoefficients),
 }
 
 #[derive(Deserialize)]
@@ -426,6 +444,40 @@ fn non_negative(what: &str, c: Color) -> std::result::Result<Color, String> {
         Ok(c)
     } else {
         Err(format!("{what} must be finite and non-negative, got {c}"))
+    }
+}
+
+/// The material's dispersion (`sellmeier` or `abbe`, not both) and its
+/// index at the d line: `ior` if given, else the Sellmeier index at
+/// 587.56 nm.
+fn dispersion(m: &FileMaterial) -> std::result::Result<(Option<Dispersion>, Option<f32>), String> {
+    match (&m.sellmeier, m.abbe) {
+        (None, None) => Ok((None, m.ior)),
+        (Some(_), Some(_)) => Err("give either sellmeier or abbe, not both".to_string()),
+        (None, Some(v)) => {
+            let n_d = m.ior.unwrap_or(Material::default().ior);
+            Ok((Some(Dispersion::from_abbe(n_d, v)?), m.ior))
+        }
+        (Some(s), None) => {
+            let s = match s {
+                FileSellmeier::Preset(name) => Sellmeier::PRESETS
+                    .iter()
+                    .find(|(n, _)| n.eq_ignore_ascii_case(name))
+                    .map(|(_, s)| *s)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = Sellmeier::PRESETS.iter().map(|p| p.0).collect();
+                        format!(
+                            "unknown Sellmeier glass '{name}' (known: {})",
+                            names.join(", ")
+                        )
+                    })?,
+                FileSellmeier::Custom(FileSellmeierCoefficients::Coefficients { b, c }) => {
+                    Sellmeier { b: *b, c: *c }.check()?
+                }
+            };
+            let n_d = s.ior_f64(LAMBDA_D) as f32;
+            Ok((Some(Dispersion::Sellmeier(s)), Some(m.ior.unwrap_or(n_d))))
+        }
     }
 }
 
@@ -723,7 +775,8 @@ impl Ctx<'_> {
         if !(shininess.is_finite() && shininess >= 1.0) {
             return Err(format!("shininess must be at least 1, got {shininess}"));
         }
-        let ior = m.ior.unwrap_or(d.ior);
+        let (dispersion, ior) = dispersion(m)?;
+        let ior = ior.unwrap_or(d.ior);
         if !(ior.is_finite() && ior > 0.0) {
             return Err(format!("ior must be a positive finite number, got {ior}"));
         }
@@ -738,6 +791,7 @@ impl Ctx<'_> {
             ior,
             emission: color(m.emission, d.emission, "emission")?,
             absorption: absorption(m)?,
+            dispersion,
             ..d
         })
     }

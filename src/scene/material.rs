@@ -14,6 +14,7 @@ use glam::{Vec2, Vec3};
 
 use crate::core::math::Color;
 use crate::core::microfacet::{GltfBrdf, MIN_ALPHA};
+use crate::core::spectrum::Dispersion;
 
 /// An RGB(A) image texture in linear space.
 #[derive(Debug)]
@@ -366,6 +367,11 @@ pub struct Material {
     /// its surface to leaving it, is attenuated by `exp(-sigma_a d)`
     /// (Beer-Lambert); see [`crate::transport::medium`].
     pub absorption: Color,
+    /// How the index of refraction depends on wavelength (`None`: it does
+    /// not, `ior` holds for every wavelength). A scene with a dispersive
+    /// material is path traced spectrally (see [`crate::core::spectrum`]);
+    /// other transports use `ior`.
+    pub dispersion: Option<Dispersion>,
     /// Emitted radiance (W sr^-1 m^-2 in the renderer's units).
     pub emission: Color,
     /// Optional texture multiplied into `emission`.
@@ -413,6 +419,7 @@ impl Default for Material {
             transmission: 0.0,
             ior: 1.5,
             absorption: Color::ZERO,
+            dispersion: None,
             emission: Color::ZERO,
             emission_texture: None,
             metallic_roughness: None,
@@ -471,6 +478,8 @@ pub struct SurfaceSample {
     /// Absorption coefficient of the interior behind this surface
     /// ([`Material::absorption`]).
     pub absorption: Color,
+    /// [`Material::dispersion`].
+    pub dispersion: Option<Dispersion>,
     /// Emitted radiance.
     pub emission: Color,
     /// Base colour with its texture (what Gooch shading tones).
@@ -619,6 +628,7 @@ impl Material {
                 transmission_tint: base,
                 ior: self.ior,
                 absorption: self.absorption,
+                dispersion: self.dispersion,
                 emission,
                 base,
                 diffuse_weight: (1.0 - metallic.clamp(0.0, 1.0)) * (1.0 - transmission),
@@ -634,6 +644,7 @@ impl Material {
             transmission_tint: base,
             ior: self.ior,
             absorption: self.absorption,
+            dispersion: self.dispersion,
             emission,
             base,
             diffuse_weight: self.diffuse,

@@ -32,6 +32,7 @@
 mod common;
 
 mod analytic;
+mod dispersion;
 mod environment;
 mod illustration;
 mod large_worlds;

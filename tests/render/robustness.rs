@@ -180,6 +180,7 @@ fn glass(ior: f32) -> SurfaceSample {
         transmission_tint: Color::ONE,
         ior,
         absorption: Color::ZERO,
+        dispersion: None,
         emission: Color::ZERO,
         base: Color::ONE,
         diffuse_weight: 0.0,

@@ -63,6 +63,7 @@ pub(super) const UNDERSTOOD_EXTENSIONS: &[&str] = &[
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
     "KHR_materials_volume",
+    "KHR_materials_dispersion",
     "KHR_materials_specular",
     "KHR_texture_transform",
     "KHR_mesh_quantization",

@@ -6,6 +6,7 @@ use glam::Vec3;
 
 use crate::core::math::Color;
 use crate::core::optics;
+use crate::core::spectrum::Dispersion;
 use crate::scene::material::{Alpha, AlphaMode, Material, NormalMap};
 
 use super::textures::{normal_texture, texture};
@@ -95,6 +96,19 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
         ior,
     );
     material.emission = emission;
+    if let Some(v) = m.extension_value("KHR_materials_dispersion") {
+        let factor = v.get("dispersion").map_or(Some(0.0), |d| d.as_f64());
+        let factor = factor.map(|f| f as f32).unwrap_or(f32::NAN);
+        check_factor(factor, "KHR_materials_dispersion: dispersion", &label)?;
+        // The extension's factor is 20 / V (V the Abbe number); 0 means
+        // no dispersion.
+        if factor > 0.0 {
+            material.dispersion = Some(
+                Dispersion::from_abbe(ior, 20.0 / factor)
+                    .map_err(|e| format!("{label}: KHR_materials_dispersion: {e}"))?,
+            );
+        }
+    }
     if let Some(v) = m.volume() {
         material.absorption = volume_absorption(&v).map_err(|e| format!("{label}: {e}"))?;
     }
