@@ -48,6 +48,8 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// Radiosity's options (used by [`Transport::Radiosity`] only).
+    pub radiosity: crate::core::radiosity::RadiositySettings,
     /// Photon mapping's parameters (used by [`Transport::Photon`] only).
     pub photon: crate::core::photon_settings::PhotonSettings,
 }
@@ -194,6 +196,9 @@ pub enum Transport {
     /// multiple importance sampling: emissive surfaces are area lights,
     /// diffuse surfaces scatter light onwards.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once
+    /// per scene and looked up by view rays (see [`crate::radiosity`]).
+    Radiosity,
     /// Progressive photon mapping: photons traced from the lights into a
     /// caustic and a global map each iteration, read by the camera side
     /// at diffuse and glossy surfaces (see [`crate::transport::photon`]).
@@ -206,6 +211,7 @@ impl Transport {
         match self {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
+            Transport::Radiosity => "radiosity",
             Transport::Photon => "photon",
         }
     }
@@ -270,6 +276,7 @@ impl Default for RenderSettings {
             gooch: GoochParams::default(),
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
+            radiosity: Default::default(),
             photon: Default::default(),
         }
     }
@@ -354,6 +361,12 @@ impl RenderSettings {
             );
         }
         self.gooch.validate()?;
+        if self.transport == Transport::Radiosity {
+            self.radiosity.validate()?;
+            if self.window.is_some() {
+                return Err("radiosity renders whole images: it takes no render window".into());
+            }
+        }
         if self.transport == Transport::Photon {
             self.photon.validate()?;
             if self.spp as u64 * self.photon.iterations as u64 > MAX_SPP as u64 {

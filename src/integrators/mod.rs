@@ -8,6 +8,7 @@ pub mod lines;
 pub mod overlay;
 pub mod photon;
 pub mod progressive;
+pub mod radiosity;
 pub mod recursive;
 pub mod vector_lines;
 pub mod wavefront;

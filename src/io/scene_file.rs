@@ -82,6 +82,8 @@ struct FileSettings {
     lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
+    /// Radiosity's options (`[settings.radiosity]`).
+    radiosity: Option<crate::core::radiosity::RadiosityDesc>,
     /// Photon mapping (each optional).
     photon: Option<FilePhoton>,
 }
@@ -132,6 +134,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Radiosity,
     Photon,
 }
 
@@ -643,6 +646,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Radiosity => crate::core::settings::Transport::Radiosity,
                 FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
@@ -662,6 +666,7 @@ impl Ctx<'_> {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
             }),
+            radiosity: s.radiosity.unwrap_or_default(),
         })
     }
 

@@ -13,6 +13,9 @@
 //!   path tracer (Cornell box) and bit for bit across thread counts;
 //! * `cargo test --test render media::` — absorbing interiors (Beer-Lambert)
 //!   from TOML and glTF `KHR_materials_volume` in every transport;
+//! * `cargo test --test render radiosity::` — radiosity transport: the
+//!   Cornell box against the path tracer, the solution reused while the
+//!   camera moves, thread-count independence, refused input;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -41,6 +44,7 @@ mod models;
 mod overlay;
 mod path;
 mod photon;
+mod radiosity;
 mod robustness;
 mod scene_updates;
 mod shards;

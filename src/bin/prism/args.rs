@@ -274,6 +274,9 @@ pub enum TransportArg {
     /// Path tracing with next-event estimation and MIS; emissive surfaces
     /// are area lights.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once,
+    /// then viewed (see the --radiosity-* and --patch-size options).
+    Radiosity,
     /// Progressive photon mapping: caustic and global photon maps from
     /// every light, read at diffuse surfaces (recursive integrator).
     Photon,
@@ -284,6 +287,7 @@ impl From<TransportArg> for Transport {
         match a {
             TransportArg::Whitted => Transport::Whitted,
             TransportArg::Path => Transport::Path,
+            TransportArg::Radiosity => Transport::Radiosity,
             TransportArg::Photon => Transport::Photon,
         }
     }

@@ -15,6 +15,7 @@ struct Cli {
 mod args;
 mod bench;
 mod compare;
+mod radiosity_args;
 mod rays;
 mod render;
 mod shard;
