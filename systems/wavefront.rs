@@ -532,6 +532,7 @@ pub fn advance_bounce(
 
 /// Stage: adds the batch's paths to their pixels.
 pub fn update_film(
+    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
     mut pixels: ResMut<PixelSums>,
@@ -539,7 +540,15 @@ pub fn update_film(
 ) {
     let (first, _) = frame.batches[frame.batch];
     stats.0.run_stage(Stage::UpdateFilm, |counters| {
-        kernels::update_film(&radiance.0, &frame.paths, first, &mut pixels.0, counters)
+        kernels::update_film(
+            &frame.scene,
+            &config.settings,
+            &radiance.0,
+            &frame.paths,
+            first,
+            &mut pixels.0,
+            counters,
+        )
     });
 }
 

@@ -14,4 +14,5 @@ pub mod radiosity;
 pub mod rng;
 pub mod sampling;
 pub mod settings;
+pub mod spectrum;
 pub mod window;

@@ -2,6 +2,8 @@
 
 use glam::Vec3A;
 
+use crate::core::math::Color;
+
 /// Mirror reflection of incident direction `d` (pointing towards the
 /// surface) about unit normal `n`.
 #[inline]
@@ -125,6 +127,67 @@ pub fn offset_origin_relative(p: Vec3A, n: Vec3A) -> Vec3A {
 /// margin, and along the normal's largest component (at least 1/sqrt(3)
 /// of it) the move is still 9 ulps, so the point always moves.
 pub const OFFSET_ULPS: f32 = 16.0;
+
+/// `exp(-sigma d)` per channel; zero where `sigma d` is infinite, so no
+/// NaN can come out of an infinite coefficient.
+#[inline]
+pub fn beer_lambert(sigma: Color, distance: f32) -> Color {
+    let tau = sigma * distance.max(0.0);
+    Color::new(transmit(tau.x), transmit(tau.y), transmit(tau.z))
+}
+
+#[inline]
+fn transmit(tau: f32) -> f32 {
+    if tau > 0.0 { (-tau).exp() } else { 1.0 }
+}
+
+/// The absorption coefficient that leaves `color` of the light after
+/// `distance` (the artist's parameters, as glTF's `KHR_materials_volume`
+/// gives them: `attenuationColor` and `attenuationDistance`):
+/// `sigma_a = -ln(color) / distance` per channel. A channel of colour 1 or
+/// an infinite distance absorbs nothing; a channel of colour 0 absorbs
+/// everything (an infinite coefficient). Errors (to be prefixed by the
+/// owner's name) for a colour outside `[0, 1]` or NaN and for a distance
+/// that is not positive.
+pub fn absorption_from_attenuation(color: Color, distance: f32) -> Result<Color, String> {
+    if !(color.min_element() >= 0.0 && color.max_element() <= 1.0) {
+        return Err(format!(
+            "attenuation colour must lie in [0, 1] per channel, got [{}, {}, {}]",
+            color.x, color.y, color.z
+        ));
+    }
+    if !(distance > 0.0) {
+        return Err(format!(
+            "attenuation distance must be positive, got {distance}"
+        ));
+    }
+    if distance == f32::INFINITY {
+        return Ok(Color::ZERO);
+    }
+    let sigma = |c: f32| {
+        if c >= 1.0 {
+            0.0
+        } else if c <= 0.0 {
+            f32::INFINITY
+        } else {
+            -c.ln() / distance
+        }
+    };
+    Ok(Color::new(sigma(color.x), sigma(color.y), sigma(color.z)))
+}
+
+/// Checks an absorption coefficient: every channel non-negative and not
+/// NaN (infinity is allowed: the interior is black). The error is to be
+/// prefixed by the owner's name.
+pub fn check_absorption(sigma: Color) -> Result<Color, String> {
+    if !(sigma.min_element() >= 0.0) || sigma.is_nan() {
+        return Err(format!(
+            "absorption coefficient (sigma_a) must be non-negative in every channel, got [{}, {}, {}]",
+            sigma.x, sigma.y, sigma.z
+        ));
+    }
+    Ok(sigma)
+}
 
 #[cfg(test)]
 mod tests {

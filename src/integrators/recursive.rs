@@ -14,6 +14,7 @@ use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
+use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -32,6 +33,10 @@ pub fn trace(
         return scene.escaped_radiance(ray.direction);
     };
     let it = Interaction::new(scene, ray, &hit);
+    // A segment that ran through an absorbing interior carries its
+    // transmittance to everything seen at its end.
+    let interior = interior_transmittance(&it, hit.t * ray.direction.length());
+    let throughput = interior.map_or(throughput, |tr| throughput * tr);
     let mut radiance = it.surface.emission;
     if it.is_lit_by_lights() && settings.style == Style::Gooch {
         radiance += gooch_shade(&settings.gooch, scene.lights(), &it);
@@ -59,7 +64,7 @@ pub fn trace(
             radiance += s.weight * trace(scene, settings, &s.ray, depth + 1, t, counters);
         }
     }
-    radiance
+    interior.map_or(radiance, |tr| radiance * tr)
 }
 
 /// Radiance along a camera ray by path tracing: a loop, one vertex per
@@ -72,6 +77,21 @@ pub fn trace_path(
     sampler: &mut Sampler,
     counters: &mut RenderCounters,
 ) -> Color {
+    let lambda = path::path_wavelength(scene, settings, sampler);
+    let l = trace_path_at(scene, settings, camera_ray, sampler, lambda, counters);
+    path::weigh_wavelength(l, lambda)
+}
+
+/// [`trace_path`] at wavelength `lambda` (spectral mode) or in RGB
+/// (`None`), without the film weight of the wavelength.
+fn trace_path_at(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    sampler: &mut Sampler,
+    lambda: Option<f32>,
+    counters: &mut RenderCounters,
+) -> Color {
     let mut radiance = Color::ZERO;
     let mut throughput = Color::ONE;
     let mut ray = *camera_ray;
@@ -82,8 +102,12 @@ pub fn trace_path(
             radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
             return radiance;
         };
-        let it = Interaction::new(scene, &ray, &hit);
+        let mut it = Interaction::new(scene, &ray, &hit);
+        path::at_wavelength(&mut it, lambda);
         let distance = hit.t * ray.direction.length();
+        if let Some(tr) = interior_transmittance(&it, distance) {
+            throughput *= tr;
+        }
         radiance +=
             throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
         let lobes = LobeChoice::new(&it);

@@ -15,6 +15,8 @@ use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
+use crate::core::optics;
+use crate::core::spectrum::{Dispersion, LAMBDA_D, Sellmeier};
 use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
 use crate::geometry::shapes::Shape;
 use crate::geometry::transform::Transform;
@@ -240,6 +242,28 @@ struct FileMaterial {
     transmission: Option<f32>,
     ior: Option<f32>,
     emission: Option<FileColor>,
+    /// Absorption coefficient of the interior (sigma_a, per unit length).
+    absorption: Option<FileColor>,
+    /// Colour left after `attenuation_distance` inside (the artist's form).
+    attenuation_color: Option<FileColor>,
+    attenuation_distance: Option<f32>,
+    /// Dispersion by Sellmeier's equation: a preset name or coefficients.
+    sellmeier: Option<FileSellmeier>,
+    /// Dispersion by an Abbe number (Cauchy's law through `ior`).
+    abbe: Option<f32>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum FileSellmeierCoefficients {
+    Coefficients { b: [f64; 3], c: [f64; 3] },
+}
+
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+enum FileSellmeier {
+    Preset(String),
+    Custom(FileSellmeierCoefficients),
 }
 
 #[derive(Deserialize)]
@@ -447,6 +471,57 @@ fn non_negative(what: &str, c: Color) -> std::result::Result<Color, String> {
         Ok(c)
     } else {
         Err(format!("{what} must be finite and non-negative, got {c}"))
+    }
+}
+
+/// The material's dispersion (`sellmeier` or `abbe`, not both) and its
+/// index at the d line: `ior` if given, else the Sellmeier index at
+/// 587.56 nm.
+fn dispersion(m: &FileMaterial) -> std::result::Result<(Option<Dispersion>, Option<f32>), String> {
+    match (&m.sellmeier, m.abbe) {
+        (None, None) => Ok((None, m.ior)),
+        (Some(_), Some(_)) => Err("give either sellmeier or abbe, not both".to_string()),
+        (None, Some(v)) => {
+            let n_d = m.ior.unwrap_or(Material::default().ior);
+            Ok((Some(Dispersion::from_abbe(n_d, v)?), m.ior))
+        }
+        (Some(s), None) => {
+            let s = match s {
+                FileSellmeier::Preset(name) => Sellmeier::PRESETS
+                    .iter()
+                    .find(|(n, _)| n.eq_ignore_ascii_case(name))
+                    .map(|(_, s)| *s)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = Sellmeier::PRESETS.iter().map(|p| p.0).collect();
+                        format!(
+                            "unknown Sellmeier glass '{name}' (known: {})",
+                            names.join(", ")
+                        )
+                    })?,
+                FileSellmeier::Custom(FileSellmeierCoefficients::Coefficients { b, c }) => {
+                    Sellmeier { b: *b, c: *c }.check()?
+                }
+            };
+            let n_d = s.ior_f64(LAMBDA_D) as f32;
+            Ok((Some(Dispersion::Sellmeier(s)), Some(m.ior.unwrap_or(n_d))))
+        }
+    }
+}
+
+/// The interior's absorption coefficient: `absorption` (sigma_a) or
+/// `attenuation_color` with `attenuation_distance`, not both.
+fn absorption(m: &FileMaterial) -> std::result::Result<Color, String> {
+    match (m.absorption, m.attenuation_color, m.attenuation_distance) {
+        (None, None, None) => Ok(Color::ZERO),
+        (Some(a), None, None) => optics::check_absorption(a.get()),
+        (None, Some(c), Some(d)) => optics::absorption_from_attenuation(c.get(), d),
+        (None, _, _) => Err(
+            "attenuation_color and attenuation_distance must be given together".to_string(),
+        ),
+        (Some(_), _, _) => Err(
+            "give either absorption (sigma_a) or attenuation_color with attenuation_distance, not both"
+                .to_string(),
+        ),
     }
 }
 
@@ -747,7 +822,8 @@ impl Ctx<'_> {
         if !(shininess.is_finite() && shininess >= 1.0) {
             return Err(format!("shininess must be at least 1, got {shininess}"));
         }
-        let ior = m.ior.unwrap_or(d.ior);
+        let (dispersion, ior) = dispersion(m)?;
+        let ior = ior.unwrap_or(d.ior);
         if !(ior.is_finite() && ior > 0.0) {
             return Err(format!("ior must be a positive finite number, got {ior}"));
         }
@@ -761,6 +837,8 @@ impl Ctx<'_> {
             transmission: unit_interval("transmission", m.transmission.unwrap_or(0.0))?,
             ior,
             emission: color(m.emission, d.emission, "emission")?,
+            absorption: absorption(m)?,
+            dispersion,
             ..d
         })
     }

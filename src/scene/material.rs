@@ -14,6 +14,7 @@ use glam::{Vec2, Vec3};
 
 use crate::core::math::Color;
 use crate::core::microfacet::{GltfBrdf, MIN_ALPHA};
+use crate::core::spectrum::Dispersion;
 
 /// An RGB(A) image texture in linear space.
 #[derive(Debug)]
@@ -360,6 +361,17 @@ pub struct Material {
     pub transmission: f32,
     /// Index of refraction of the inside, relative to the outside medium.
     pub ior: f32,
+    /// Absorption coefficient `sigma_a` of the object's interior, per
+    /// channel, in inverse scene units (zero: a clear or opaque interior).
+    /// A ray that travels a distance `d` inside the object, from entering
+    /// its surface to leaving it, is attenuated by `exp(-sigma_a d)`
+    /// (Beer-Lambert); see [`crate::transport::medium`].
+    pub absorption: Color,
+    /// How the index of refraction depends on wavelength (`None`: it does
+    /// not, `ior` holds for every wavelength). A scene with a dispersive
+    /// material is path traced spectrally (see [`crate::core::spectrum`]);
+    /// other transports use `ior`.
+    pub dispersion: Option<Dispersion>,
     /// Emitted radiance (W sr^-1 m^-2 in the renderer's units).
     pub emission: Color,
     /// Optional texture multiplied into `emission`.
@@ -406,6 +418,8 @@ impl Default for Material {
             mirror: Color::ZERO,
             transmission: 0.0,
             ior: 1.5,
+            absorption: Color::ZERO,
+            dispersion: None,
             emission: Color::ZERO,
             emission_texture: None,
             metallic_roughness: None,
@@ -461,6 +475,11 @@ pub struct SurfaceSample {
     pub transmission_tint: Color,
     /// Relative index of refraction.
     pub ior: f32,
+    /// Absorption coefficient of the interior behind this surface
+    /// ([`Material::absorption`]).
+    pub absorption: Color,
+    /// [`Material::dispersion`].
+    pub dispersion: Option<Dispersion>,
     /// Emitted radiance.
     pub emission: Color,
     /// Base colour with its texture (what Gooch shading tones).
@@ -608,6 +627,8 @@ impl Material {
                 transmission: transmission * (1.0 - metallic),
                 transmission_tint: base,
                 ior: self.ior,
+                absorption: self.absorption,
+                dispersion: self.dispersion,
                 emission,
                 base,
                 diffuse_weight: (1.0 - metallic.clamp(0.0, 1.0)) * (1.0 - transmission),
@@ -622,6 +643,8 @@ impl Material {
             transmission: self.transmission,
             transmission_tint: base,
             ior: self.ior,
+            absorption: self.absorption,
+            dispersion: self.dispersion,
             emission,
             base,
             diffuse_weight: self.diffuse,

@@ -54,6 +54,9 @@ pub struct RenderScene {
     /// ([`Material::alpha`]): only then do intersection queries look at
     /// materials ([`has_cutouts`]; kept up to date by the material updates).
     pub(super) cutouts: bool,
+    /// True when a material is dispersive ([`has_dispersion`]; kept up to
+    /// date by the material updates): path transport is then spectral.
+    pub(super) spectral: bool,
 }
 
 impl RenderScene {
@@ -95,6 +98,7 @@ impl RenderScene {
         let emitters = EmitterTable::build(&instances, &materials);
         Self {
             cutouts: has_cutouts(&materials),
+            spectral: has_dispersion(&materials),
             instances,
             materials,
             origin,
@@ -132,6 +136,12 @@ impl RenderScene {
     /// All instances; the top-level BVH indexes this array.
     pub fn instances(&self) -> &[Instance] {
         &self.instances
+    }
+
+    /// True when a material is dispersive: path transport then traces one
+    /// wavelength per path (see [`crate::core::spectrum`]).
+    pub fn is_spectral(&self) -> bool {
+        self.spectral
     }
 
     /// Materials referenced by instances.
@@ -206,6 +216,11 @@ impl RenderScene {
 /// transparency), which intersection queries must then honour.
 pub(super) fn has_cutouts(materials: &[Material]) -> bool {
     materials.iter().any(|m| m.alpha.is_some())
+}
+
+/// True when any of `materials` is dispersive.
+pub(super) fn has_dispersion(materials: &[Material]) -> bool {
+    materials.iter().any(|m| m.dispersion.is_some())
 }
 
 pub(super) fn resolve_lights(sources: &[(Light, Transform)], origin: DVec3) -> Vec<WorldLight> {

@@ -7,7 +7,7 @@ use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
-use crate::scene::render_scene::{RenderScene, has_cutouts, resolve_lights};
+use crate::scene::render_scene::{RenderScene, has_cutouts, has_dispersion, resolve_lights};
 use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.
@@ -74,6 +74,7 @@ impl RenderScene {
     pub fn push_material(&mut self, material: Material) -> u32 {
         self.emitters_stale = true;
         self.cutouts |= material.alpha.is_some();
+        self.spectral |= material.dispersion.is_some();
         self.materials.push(material);
         self.materials.len() as u32 - 1
     }
@@ -83,6 +84,7 @@ impl RenderScene {
         self.emitters_stale = true;
         self.materials[index as usize] = material;
         self.cutouts = has_cutouts(&self.materials);
+        self.spectral = has_dispersion(&self.materials);
     }
 
     /// Removes material `index` by moving the last material into its
@@ -105,6 +107,7 @@ impl RenderScene {
         }
         let removed = self.materials.swap_remove(index as usize);
         self.cutouts = has_cutouts(&self.materials);
+        self.spectral = has_dispersion(&self.materials);
         removed
     }
 

@@ -5,6 +5,7 @@
 
 pub mod gooch;
 pub mod interaction;
+pub mod medium;
 pub mod path;
 pub mod photon;
 pub mod whitted;

@@ -26,7 +26,8 @@ use crate::core::optics::{
 };
 use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
-use crate::core::settings::RenderSettings;
+use crate::core::settings::{RenderSettings, Transport};
+use crate::core::spectrum::{sample_wavelength, wavelength_weight};
 use crate::scene::RenderScene;
 use crate::scene::environment::Environment;
 use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
@@ -239,6 +240,47 @@ pub fn sample_bsdf(
         pdf: 0.0,
         kind: RayKind::Reflection,
     })
+}
+
+/// The sampler dimension of a path's wavelength in spectral mode: a set
+/// of its own, far beyond every bounce's.
+pub const WAVELENGTH_DIMENSION: u32 = 0xFFFF_FFF0;
+
+/// The path's wavelength (nm) when path transport is spectral (the scene
+/// has a dispersive material), read from its own sampler dimension so
+/// that both integrators draw the same; `None` otherwise, and then nothing
+/// of the path changes.
+#[inline]
+pub fn path_wavelength(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    sampler: &mut Sampler,
+) -> Option<f32> {
+    if !(scene.is_spectral() && settings.transport == Transport::Path) {
+        return None;
+    }
+    sampler.set_dimension(WAVELENGTH_DIMENSION);
+    Some(sample_wavelength(sampler.next_f32()))
+}
+
+/// Sets the index of refraction of a dispersive surface to its value at
+/// the path's wavelength `lambda` (nothing without one).
+#[inline]
+pub fn at_wavelength(it: &mut Interaction, lambda: Option<f32>) {
+    if let (Some(l), Some(d)) = (lambda, it.surface.dispersion) {
+        it.surface.ior = d.ior(l);
+    }
+}
+
+/// The film weight of a path of wavelength `lambda`: its RGB radiance
+/// times the wavelength's RGB response ([`wavelength_weight`]); unchanged
+/// without a wavelength.
+#[inline]
+pub fn weigh_wavelength(radiance: Color, lambda: Option<f32>) -> Color {
+    match lambda {
+        Some(l) => radiance * wavelength_weight(l),
+        None => radiance,
+    }
 }
 
 /// First dimension of bounce `depth` in a path's sampler.

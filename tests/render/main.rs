@@ -11,6 +11,8 @@
 //!   answers (white furnace, area lights) and the Whitted tracer;
 //! * `cargo test --test render photon::` — photon transport against the
 //!   path tracer (Cornell box) and bit for bit across thread counts;
+//! * `cargo test --test render media::` — absorbing interiors (Beer-Lambert)
+//!   from TOML and glTF `KHR_materials_volume` in every transport;
 //! * `cargo test --test render radiosity::` — radiosity transport: the
 //!   Cornell box against the path tracer, the solution reused while the
 //!   camera moves, thread-count independence, refused input;
@@ -38,10 +40,12 @@
 mod common;
 
 mod analytic;
+mod dispersion;
 mod environment;
 mod illustration;
 mod large_worlds;
 mod lightfield;
+mod media;
 mod models;
 mod overlay;
 mod panorama;

@@ -179,6 +179,8 @@ fn glass(ior: f32) -> SurfaceSample {
         transmission: 1.0,
         transmission_tint: Color::ONE,
         ior,
+        absorption: Color::ZERO,
+        dispersion: None,
         emission: Color::ZERO,
         base: Color::ONE,
         diffuse_weight: 0.0,

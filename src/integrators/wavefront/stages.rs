@@ -26,6 +26,7 @@ use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
+use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -172,8 +173,13 @@ fn shade_hits(
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         for i in range {
-            let h = hits.get(i);
+            let mut h = hits.get(i);
             let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+            // A segment that ran through an absorbing interior carries its
+            // transmittance to everything seen at its end.
+            if let Some(tr) = interior_transmittance(&it, h.distance) {
+                h.throughput *= tr;
+            }
             kernel(&h, &it, out);
         }
     });
@@ -256,6 +262,16 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         }
         let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
         let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
+        let lambda = path::path_wavelength(scene, settings, &mut sampler);
+        let spectral;
+        let it = if lambda.is_some() {
+            let mut at = *it;
+            path::at_wavelength(&mut at, lambda);
+            spectral = at;
+            &spectral
+        } else {
+            it
+        };
         let lobes = LobeChoice::new(it);
         if NEE {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
@@ -383,7 +399,14 @@ pub fn trace_shadow_rays(
 /// Stage: adds each finished path of the batch to its window pixel,
 /// dropping and counting non-finite samples. The sums are exact, so the
 /// order in which paths are added does not matter.
+///
+/// In spectral mode (path transport of a scene with a dispersive
+/// material) each path's radiance is first weighted by its wavelength's
+/// RGB response, the wavelength drawn again from the path's sampler keys
+/// as the shading stages drew it.
 pub fn update_film(
+    scene: &RenderScene,
+    settings: &RenderSettings,
     radiance: &[Color],
     paths: &PathMap,
     first: u64,
@@ -392,8 +415,16 @@ pub fn update_film(
 ) {
     let pixels = sums.pixels_mut();
     let n = paths.samples() as u64;
+    let spectral = scene.is_spectral() && settings.transport == Transport::Path;
     for (local, &l) in radiance.iter().enumerate() {
         let pixel = ((first + local as u64) / n) as usize;
+        let l = if spectral {
+            let (key, sample) = paths.sampler_keys(first + local as u64);
+            let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, key, sample);
+            path::weigh_wavelength(l, path::path_wavelength(scene, settings, &mut sampler))
+        } else {
+            l
+        };
         accumulate(&mut pixels[pixel], l, counters);
     }
 }

@@ -54,14 +54,16 @@ pub(super) fn open(bytes: &[u8], path: &Path) -> Result<Ctx, String> {
     })
 }
 
-/// The extensions this loader reads (some in part: `KHR_materials_volume`
-/// is accepted but its attenuation ignored, see the module documentation).
+/// The extensions this loader reads (some in part: of `KHR_materials_volume`
+/// only the attenuation and whether the surface is thin-walled, see the
+/// module documentation).
 pub(super) const UNDERSTOOD_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
     "KHR_materials_transmission",
     "KHR_materials_ior",
     "KHR_materials_emissive_strength",
     "KHR_materials_volume",
+    "KHR_materials_dispersion",
     "KHR_materials_specular",
     "KHR_texture_transform",
     "KHR_mesh_quantization",

@@ -5,6 +5,8 @@
 use glam::Vec3;
 
 use crate::core::math::Color;
+use crate::core::optics;
+use crate::core::spectrum::Dispersion;
 use crate::scene::material::{Alpha, AlphaMode, Material, NormalMap};
 
 use super::textures::{normal_texture, texture};
@@ -94,6 +96,22 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
         ior,
     );
     material.emission = emission;
+    if let Some(v) = m.extension_value("KHR_materials_dispersion") {
+        let factor = v.get("dispersion").map_or(Some(0.0), |d| d.as_f64());
+        let factor = factor.map(|f| f as f32).unwrap_or(f32::NAN);
+        check_factor(factor, "KHR_materials_dispersion: dispersion", &label)?;
+        // The extension's factor is 20 / V (V the Abbe number); 0 means
+        // no dispersion.
+        if factor > 0.0 {
+            material.dispersion = Some(
+                Dispersion::from_abbe(ior, 20.0 / factor)
+                    .map_err(|e| format!("{label}: KHR_materials_dispersion: {e}"))?,
+            );
+        }
+    }
+    if let Some(v) = m.volume() {
+        material.absorption = volume_absorption(&v).map_err(|e| format!("{label}: {e}"))?;
+    }
     if let Some(mr) = material.metallic_roughness.as_mut() {
         mr.specular_factor = specular_factor;
     }
@@ -151,4 +169,24 @@ fn convert_material(ctx: &Ctx, st: &mut State, m: &gltf::Material) -> Result<Mat
             Some(texture(ctx, st, &info, true, "emissive texture", &label)?);
     }
     Ok(material)
+}
+
+/// The absorption coefficient of a `KHR_materials_volume` interior:
+/// `-ln(attenuationColor) / attenuationDistance` per channel (Beer-Lambert,
+/// see [`crate::transport::medium`]). A thin-walled surface
+/// (`thicknessFactor` 0) bounds no volume and absorbs nothing; otherwise
+/// the distance a ray really travels inside replaces `thicknessFactor`,
+/// which the specification offers as an estimate for renderers that
+/// cannot trace it.
+fn volume_absorption(v: &gltf::material::Volume) -> Result<Color, String> {
+    let thickness = v.thickness_factor();
+    if !(thickness >= 0.0 && thickness.is_finite()) {
+        return Err(format!(
+            "KHR_materials_volume: thicknessFactor must be a non-negative number, got {thickness}"
+        ));
+    }
+    let color = Color::from(v.attenuation_color());
+    let sigma = optics::absorption_from_attenuation(color, v.attenuation_distance())
+        .map_err(|e| format!("KHR_materials_volume: {e}"))?;
+    Ok(if thickness == 0.0 { Color::ZERO } else { sigma })
 }

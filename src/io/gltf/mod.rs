@@ -30,7 +30,11 @@
 //!   (factor), `KHR_materials_ior`, and `KHR_materials_specular` (factor
 //!   and colour: the dielectric F0 is `((ior-1)/(ior+1))^2 * specularFactor *
 //!   specularColorFactor`, 0.04 for the default ior of 1.5, so a factor of
-//!   0 leaves a Lambertian surface).
+//!   0 leaves a Lambertian surface). `KHR_materials_volume` gives the
+//!   interior an absorption coefficient `-ln(attenuationColor) /
+//!   attenuationDistance` (Beer-Lambert along the distance a ray really
+//!   travels inside, see [`crate::transport::medium`]); a thin-walled
+//!   surface (`thicknessFactor` 0) absorbs nothing, as the extension says.
 //!   Primitives without a material get the glTF default material (white,
 //!   metallic 1, roughness 1). `KHR_texture_transform` is honoured.
 //!   Normal maps (`normalTexture` with its scale, tangent space, green
@@ -73,7 +77,8 @@
 //! Occlusion, transmission, specular and other extension textures;
 //! `KHR_texture_transform` on normal textures; `doubleSided` (nothing is
 //! culled, so winding and negative-determinant transforms do not matter);
-//! `KHR_materials_volume` (thickness and attenuation); minification
+//! `KHR_materials_volume`'s thickness texture and, for volumes, its
+//! thickness (the traced distance inside is used; see below); minification
 //! filters (no mipmaps: the magnification filter is used);
 //! texture coordinate sets other than 0 (set 0 is used, with a warning);
 //! light `range` (lights fall off with the inverse square law forever);

@@ -51,6 +51,7 @@ pub mod grid;
 #[cfg(test)]
 mod tests;
 
+use crate::transport::medium::interior_transmittance;
 use std::f32::consts::PI;
 
 use glam::{Vec2, Vec3, Vec3A};
@@ -198,6 +199,9 @@ pub fn trace_photon(
             break;
         };
         let it = Interaction::new(scene, &ray, &hit);
+        if let Some(tr) = interior_transmittance(&it, hit.t * ray.direction.length()) {
+            power *= tr;
+        }
         let lobes = LobeChoice::new(&it);
         if lobes.has_smooth() {
             let photon = Photon {
@@ -356,6 +360,9 @@ fn specular_chain(
             break;
         };
         let it = Interaction::new(ctx.scene, &ray, &hit);
+        if let Some(tr) = interior_transmittance(&it, hit.t * ray.direction.length()) {
+            throughput *= tr;
+        }
         if reading == Reading::Camera {
             radiance += throughput * it.surface.emission;
         }
