@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
-use crate::core::math::{Color, Ray, max_component};
+use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
@@ -17,13 +17,15 @@ use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
-/// Radiance arriving along `ray`; `depth` is the number of bounces so far
+/// Radiance arriving along `ray`, whose ray cone is `cone` (texture level
+/// of detail); `depth` is the number of bounces so far
 /// and `throughput` the weight this radiance will be multiplied by on its
 /// way to the camera (used for the contribution threshold).
 pub fn trace(
     scene: &RenderScene,
     settings: &RenderSettings,
     ray: &Ray,
+    cone: RayCone,
     depth: u32,
     throughput: Color,
     counters: &mut RenderCounters,
@@ -31,7 +33,7 @@ pub fn trace(
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
         return scene.escaped_radiance(ray.direction);
     };
-    let it = Interaction::new(scene, ray, &hit);
+    let it = Interaction::with_cone(scene, ray, &hit, cone);
     let mut radiance = it.surface.emission;
     if it.is_lit_by_lights() && settings.style == Style::Gooch {
         radiance += gooch_shade(&settings.gooch, scene.lights(), &it);
@@ -56,7 +58,7 @@ pub fn trace(
                 RayKind::Refraction => counters.rays.refraction += 1,
                 RayKind::Camera => counters.rays.camera += 1,
             }
-            radiance += s.weight * trace(scene, settings, &s.ray, depth + 1, t, counters);
+            radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
         }
     }
     radiance
@@ -64,17 +66,20 @@ pub fn trace(
 
 /// Radiance along a camera ray by path tracing: a loop, one vertex per
 /// bounce, with next-event estimation at every vertex and multiple
-/// importance sampling of emission found by scattered rays.
+/// importance sampling of emission found by scattered rays. `cone` is the
+/// camera ray's cone (texture level of detail).
 pub fn trace_path(
     scene: &RenderScene,
     settings: &RenderSettings,
     camera_ray: &Ray,
+    cone: RayCone,
     sampler: &mut Sampler,
     counters: &mut RenderCounters,
 ) -> Color {
     let mut radiance = Color::ZERO;
     let mut throughput = Color::ONE;
     let mut ray = *camera_ray;
+    let mut cone = cone;
     let mut prev_pdf = 0.0;
     let mut depth = 0;
     loop {
@@ -82,7 +87,7 @@ pub fn trace_path(
             radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
             return radiance;
         };
-        let it = Interaction::new(scene, &ray, &hit);
+        let it = Interaction::with_cone(scene, &ray, &hit, cone);
         let distance = hit.t * ray.direction.length();
         radiance +=
             throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
@@ -103,6 +108,7 @@ pub fn trace_path(
         }
         throughput = throughput * c.sample.weight * c.scale;
         ray = c.sample.ray;
+        cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;
     }
@@ -125,11 +131,11 @@ pub fn pixel_sample(
     let ray = camera_ray(cam, x, y, spp, &mut sampler);
     counters.rays.camera += 1;
     match settings.transport {
-        Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Whitted => trace(scene, settings, &ray, cam.cone(), 0, Color::ONE, counters),
         // A lone sample has no photon maps: photon transport renders through
         // `integrators::photon`; here it falls back to path tracing.
         Transport::Path | Transport::Photon => {
-            trace_path(scene, settings, &ray, &mut sampler, counters)
+            trace_path(scene, settings, &ray, cam.cone(), &mut sampler, counters)
         }
     }
 }

@@ -58,6 +58,7 @@ pub fn generate_camera_rays(
             path: local as u32,
             depth: 0,
             pdf: 0.0,
+            cone: camera.cone(),
         });
     }
     rays.camera += count as u64;
@@ -172,7 +173,7 @@ fn shade_hits(
         out.clear();
         for i in range {
             let h = hits.get(i);
-            let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+            let it = Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             kernel(&h, &it, out);
         }
     });
@@ -224,6 +225,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                     path: h.path,
                     depth: h.depth + 1,
                     pdf: 0.0,
+                    cone: it.cone,
                 };
                 out.push_secondary(s.kind, item);
             }
@@ -271,6 +273,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 path: h.path,
                 depth: h.depth + 1,
                 pdf: cont.sample.pdf,
+                cone: cont.cone(it),
             };
             out.push_secondary(cont.sample.kind, item);
         }

@@ -122,12 +122,7 @@ fn to_texture(img: &image::DynamicImage, srgb: bool) -> Result<ImageTexture, Str
     } else {
         Vec::new()
     };
-    Ok(ImageTexture {
-        width,
-        height,
-        texels,
-        alpha,
-    })
+    Ok(ImageTexture::with_alpha(width, height, texels, alpha))
 }
 
 /// The linear texture of image `index` (sRGB-decoded if `srgb`), cached.
