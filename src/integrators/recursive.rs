@@ -116,8 +116,10 @@ pub fn trace_path(
 
 /// Radiance of sample `s` of the `spp` samples of pixel `(x, y)`: its
 /// camera ray, traced with the settings' transport. Its random numbers
-/// are keyed by (seed, pixel, sample).
-#[inline]
+/// are keyed by (seed, pixel, sample). Always inlined into the row loop:
+/// as a call it costs about 50 instructions per sample on the cheapest
+/// scenes (callgrind), which is 3-4% of a Whitted camera ray.
+#[inline(always)]
 pub fn pixel_sample(
     scene: &RenderScene,
     settings: &RenderSettings,
