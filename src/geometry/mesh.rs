@@ -716,10 +716,7 @@ impl Mesh {
             return None;
         }
         let inv = 1.0 / det;
-        Some((
-            (e1 * d2.y - e2 * d1.y) * inv,
-            (e2 * d1.x - e1 * d2.x) * inv,
-        ))
+        Some(((e1 * d2.y - e2 * d1.y) * inv, (e2 * d1.x - e1 * d2.x) * inv))
     }
 
     /// Adds vertex tangents for normal mapping: `given` (glTF `TANGENT`,

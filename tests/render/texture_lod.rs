@@ -226,8 +226,12 @@ fn a_hit_reads_the_mip_level_of_its_ray_cone() {
         let it = Interaction::with_cone(&scene, &ray, &hit, rays.cone());
 
         let beta = 2.0 * (20.0f64).to_radians().tan() / h as f64;
-        let d = DVec3::new(ray.direction.x as f64, ray.direction.y as f64, ray.direction.z as f64)
-            .normalize();
+        let d = DVec3::new(
+            ray.direction.x as f64,
+            ray.direction.y as f64,
+            ray.direction.z as f64,
+        )
+        .normalize();
         let t = (height / -d.y) as f64;
         let cos = -d.y;
         let level = (beta * t / cos / s * 32.0).log2();
@@ -250,7 +254,10 @@ fn a_hit_reads_the_mip_level_of_its_ray_cone() {
         seen.push(level);
     }
     assert!(seen.iter().any(|&l| l < 0.0), "{seen:?}");
-    assert!(seen.iter().any(|&l| l > 0.0 && l < 5.0 && l.fract() > 0.1), "{seen:?}");
+    assert!(
+        seen.iter().any(|&l| l > 0.0 && l < 5.0 && l.fract() > 0.1),
+        "{seen:?}"
+    );
     assert!(seen.iter().any(|&l| l > 5.0), "{seen:?}");
     eprintln!("levels checked: {seen:?}");
 }

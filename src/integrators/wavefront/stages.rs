@@ -173,7 +173,8 @@ fn shade_hits(
         out.clear();
         for i in range {
             let h = hits.get(i);
-            let it = Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
+            let it =
+                Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             kernel(&h, &it, out);
         }
     });

@@ -73,8 +73,10 @@
 //! Occlusion, transmission, specular and other extension textures;
 //! `KHR_texture_transform` on normal textures; `doubleSided` (nothing is
 //! culled, so winding and negative-determinant transforms do not matter);
-//! `KHR_materials_volume` (thickness and attenuation); minification
-//! filters (no mipmaps: the magnification filter is used);
+//! `KHR_materials_volume` (thickness and attenuation); the minification
+//! filter's choice (a linear magnification filter means trilinear
+//! mipmapping by ray cones whatever the minification filter says, a
+//! nearest one no mipmapping);
 //! texture coordinate sets other than 0 (set 0 is used, with a warning);
 //! light `range` (lights fall off with the inverse square law forever);
 //! animations, skins (skinned meshes render in their bind pose
