@@ -763,6 +763,18 @@ impl Material {
         }
     }
 
+    /// True when a lookup of the material depends on its texture level of
+    /// detail: it has a colour, emission or metallic-roughness texture.
+    #[inline]
+    pub fn has_textures(&self) -> bool {
+        self.base_color_texture.is_some()
+            || self.emission_texture.is_some()
+            || self
+                .metallic_roughness
+                .as_ref()
+                .is_some_and(|mr| mr.texture.is_some())
+    }
+
     /// Evaluates the material at texture coordinate `uv` (full-resolution
     /// textures).
     pub fn sample(&self, uv: Vec2) -> SurfaceSample {

@@ -542,9 +542,11 @@ impl RenderScene {
         // The point comes from the object-space surface point, correct to a
         // few ulps of its own coordinates; `ray.at(t)` would carry the
         // rounding of a possibly distant ray origin.
+        // Texture coordinates per length only matter to textured materials.
+        let lod = self.materials[inst.material as usize].has_textures();
         let mut tangents = None;
         let (point, gn, sn, uv) = match (local, &inst.geometry) {
-            (LocalHit::Shape { point, normal, uv }, InstanceGeometry::Shape(shape)) => {
+            (LocalHit::Shape { point, normal, uv }, InstanceGeometry::Shape(shape)) if lod => {
                 tangents = shape.uv_tangents(point, normal);
                 let n = xf.normal(normal);
                 (xf.to_world.transform_point3a(point), n, n, uv)
@@ -554,7 +556,9 @@ impl RenderScene {
                 (xf.to_world.transform_point3a(point), n, n, uv)
             }
             (LocalHit::Mesh(h), InstanceGeometry::Mesh(m)) => {
-                tangents = m.uv_tangents(h.triangle);
+                if lod {
+                    tangents = m.uv_tangents(h.triangle);
+                }
                 let s = m.surface(&h);
                 let gn = xf.normal(s.geometric_normal);
                 let mut sn = xf.normal(s.shading_normal);

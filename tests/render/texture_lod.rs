@@ -232,7 +232,7 @@ fn a_hit_reads_the_mip_level_of_its_ray_cone() {
             ray.direction.z as f64,
         )
         .normalize();
-        let t = (height / -d.y) as f64;
+        let t = height / -d.y;
         let cos = -d.y;
         let level = (beta * t / cos / s * 32.0).log2();
         let at = |l: f64| image.sample_level(hit.uv, sampler, l as f32);
