@@ -31,6 +31,8 @@ pub mod geometry;
 pub mod image;
 pub mod integrators;
 pub mod io;
+pub mod lightfield;
+pub mod radiosity;
 pub mod scene;
 pub mod transport;
 

@@ -305,6 +305,7 @@ impl DemoScene {
                 look_at: glam::DVec3::new(0.0, 1.2, 0.0),
                 up: Vec3::Y,
                 vfov_degrees: 45.0,
+                shift: glam::Vec2::ZERO,
                 name: None,
                 ..Default::default()
             })

@@ -15,7 +15,9 @@
 //!    ([`sync::commit_scene`]);
 //! 3. [`PrismSystems::Render`]: trace the image into [`Frame`], with
 //!    [`render_recursive`] or, stage by stage, with the wavefront systems
-//!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]), then,
+//!    of [`wavefront`] (driven by [`wavefront::render_wavefront`]), or,
+//!    under radiosity transport, from the solution kept between frames
+//!    ([`radiosity::render_radiosity`]), then,
 //!    only when the settings ask for them, the feature lines
 //!    ([`lines::render_feature_lines`]).
 //!
@@ -30,7 +32,9 @@
 pub mod components;
 pub mod demo;
 pub mod frame;
+pub mod lightfield;
 pub mod lines;
+pub mod radiosity;
 pub mod render;
 pub mod renderer;
 pub mod sync;
@@ -90,14 +94,20 @@ pub fn add_render_systems(schedule: &mut Schedule) {
         sync::commit_scene.in_set(PrismSystems::Accelerate),
         render_recursive
             .run_if(integrator_is(IntegratorKind::Recursive))
+            .run_if(not(radiosity::transport_is_radiosity))
             .in_set(PrismSystems::Render),
         wavefront::render_wavefront
             .run_if(integrator_is(IntegratorKind::Wavefront))
+            .run_if(not(radiosity::transport_is_radiosity))
+            .in_set(PrismSystems::Render),
+        radiosity::render_radiosity
+            .run_if(radiosity::transport_is_radiosity)
             .in_set(PrismSystems::Render),
         lines::render_feature_lines
             .run_if(lines::lines_requested)
             .after(render_recursive)
             .after(wavefront::render_wavefront)
+            .after(radiosity::render_radiosity)
             .in_set(PrismSystems::Render),
     ));
 }
@@ -112,6 +122,7 @@ pub fn setup(world: &mut World) -> Schedule {
     world.init_resource::<sync::SceneSync>();
     world.init_resource::<ProgressiveRendering>();
     world.init_resource::<AccumulationState>();
+    world.init_resource::<radiosity::RadiosityState>();
     wavefront::add_wavefront_schedules(world);
     let mut schedule = Schedule::new(RenderFrame);
     add_render_systems(&mut schedule);
@@ -234,6 +245,7 @@ impl PrismPlugin {
         world.init_resource::<Frame>();
         world.init_resource::<sync::SceneSync>();
         world.init_resource::<AccumulationState>();
+        world.init_resource::<radiosity::RadiosityState>();
         wavefront::add_wavefront_schedules(world);
         add_render_systems(schedule);
     }

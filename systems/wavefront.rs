@@ -569,7 +569,7 @@ pub fn render_wavefront(world: &mut World) {
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     let paths = settings.path_map();
     let (window_width, window_rows) = (paths.columns(), paths.rows().len() as u32);
-    let camera = CameraRays::relative_to(&camera, scene.origin(), settings.width, settings.height);
+    let camera = crate::integrators::camera_rays(&scene, &camera, settings);
     world.insert_resource(WavefrontFrame {
         paths,
         scene,

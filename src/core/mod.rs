@@ -10,6 +10,7 @@ pub mod math;
 pub mod microfacet;
 pub mod optics;
 pub mod photon_settings;
+pub mod radiosity;
 pub mod rng;
 pub mod sampling;
 pub mod settings;

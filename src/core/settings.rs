@@ -48,8 +48,111 @@ pub struct RenderSettings {
     /// Where the random numbers come from: Owen-scrambled Sobol points
     /// (stratified per pixel) or independent hashed numbers.
     pub sampler: crate::core::rng::SamplerKind,
+    /// Radiosity's options (used by [`Transport::Radiosity`] only).
+    pub radiosity: crate::core::radiosity::RadiositySettings,
     /// Photon mapping's parameters (used by [`Transport::Photon`] only).
     pub photon: crate::core::photon_settings::PhotonSettings,
+    /// A panoramic camera instead of the perspective one (`None`): every
+    /// direction around the eye, see [`Panorama`].
+    pub panorama: Option<Panorama>,
+}
+
+/// A panoramic camera projection: the image holds every direction around
+/// the camera's eye, in the camera's frame (the forward direction is the
+/// environment map's `+X`, the camera's up its `+Y`, its right `+Z`), so
+/// that a panorama read back as an environment (turned to the camera's
+/// heading) lights a scene as the rendered one looked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Panorama {
+    /// Latitude-longitude (360 x 180 degrees), the environment map's layout:
+    /// column `x` is `u = x / width`, row `y` is `v = y / height`.
+    Equirect,
+    /// Six square 90-degree faces side by side, `width = 6 height`, in
+    /// the order `+X, -X, +Y, -Y, +Z, -Z` of the map frame (front, back,
+    /// up, down, right, left); each face is the perspective view from the
+    /// eye with `+Y` up (`-X` up for the `+Y` face, `+X` for `-Y`).
+    Cubemap,
+}
+
+impl Panorama {
+    /// Lower-case name, as on the command line and in scene files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Panorama::Equirect => "equirect",
+            Panorama::Cubemap => "cubemap",
+        }
+    }
+}
+
+/// A two-plane light field's capture rig as a scene file or the command
+/// line asks for it (`[lightfield]`); every field is optional and falls
+/// back to [`LightFieldSettings::DEFAULT_GRID`] and friends. See
+/// `crate::lightfield` for the parametrisation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LightFieldSettings {
+    /// Cameras across (along the camera's right) and up.
+    pub grid: Option<[u32; 2]>,
+    /// Distance between neighbouring cameras, world units.
+    pub spacing: Option<f64>,
+    /// Width and height of every captured image, pixels.
+    pub resolution: Option<[u32; 2]>,
+    /// Distance from the camera plane to the focal plane, world units.
+    pub focal_distance: Option<f64>,
+}
+
+impl LightFieldSettings {
+    /// Cameras across and up when neither the scene nor the command line
+    /// says.
+    pub const DEFAULT_GRID: [u32; 2] = [8, 8];
+    /// Image size when neither says.
+    pub const DEFAULT_RESOLUTION: [u32; 2] = [128, 128];
+    /// Largest number of cameras along one side of the grid.
+    pub const MAX_GRID_SIDE: u32 = 256;
+
+    /// These values, falling back to `under`'s field by field.
+    pub fn or(self, under: LightFieldSettings) -> Self {
+        Self {
+            grid: self.grid.or(under.grid),
+            spacing: self.spacing.or(under.spacing),
+            resolution: self.resolution.or(under.resolution),
+            focal_distance: self.focal_distance.or(under.focal_distance),
+        }
+    }
+
+    /// Checks the values given; the error names the bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some([n, m]) = self.grid
+            && !((1..=Self::MAX_GRID_SIDE).contains(&n) && (1..=Self::MAX_GRID_SIDE).contains(&m))
+        {
+            return Err(format!(
+                "the light-field grid must have 1 to {} cameras a side, got {n}x{m}",
+                Self::MAX_GRID_SIDE
+            ));
+        }
+        if let Some(s) = self.spacing
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(format!(
+                "the light-field camera spacing must be finite and positive, got {s}"
+            ));
+        }
+        if let Some([w, h]) = self.resolution
+            && !((1..=MAX_IMAGE_SIDE).contains(&w) && (1..=MAX_IMAGE_SIDE).contains(&h))
+        {
+            return Err(format!(
+                "the light-field image size must be 1 to {MAX_IMAGE_SIDE} pixels a side, got {w}x{h}"
+            ));
+        }
+        if let Some(d) = self.focal_distance
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(format!(
+                "the light-field focal distance must be finite and positive, got {d}"
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// How surfaces with a diffuse or glossy lobe are shaded.
@@ -194,6 +297,9 @@ pub enum Transport {
     /// multiple importance sampling: emissive surfaces are area lights,
     /// diffuse surfaces scatter light onwards.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once
+    /// per scene and looked up by view rays (see [`crate::radiosity`]).
+    Radiosity,
     /// Progressive photon mapping: photons traced from the lights into a
     /// caustic and a global map each iteration, read by the camera side
     /// at diffuse and glossy surfaces (see [`crate::transport::photon`]).
@@ -206,6 +312,7 @@ impl Transport {
         match self {
             Transport::Whitted => "whitted",
             Transport::Path => "path",
+            Transport::Radiosity => "radiosity",
             Transport::Photon => "photon",
         }
     }
@@ -270,6 +377,8 @@ impl Default for RenderSettings {
             gooch: GoochParams::default(),
             lines: None,
             sampler: crate::core::rng::SamplerKind::default(),
+            radiosity: Default::default(),
+            panorama: None,
             photon: Default::default(),
         }
     }
@@ -354,6 +463,28 @@ impl RenderSettings {
             );
         }
         self.gooch.validate()?;
+        if self.transport == Transport::Radiosity {
+            self.radiosity.validate()?;
+            if self.window.is_some() {
+                return Err("radiosity renders whole images: it takes no render window".into());
+            }
+        }
+        if let Some(p) = self.panorama {
+            if p == Panorama::Cubemap && self.width != 6 * self.height {
+                return Err(format!(
+                    "a cube-map panorama is six square faces side by side: its width must be \
+                     6 x its height, got {}x{}",
+                    self.width, self.height
+                ));
+            }
+            if self.lines.is_some() {
+                return Err(format!(
+                    "feature lines are drawn for the perspective camera; they do not combine \
+                     with the {} panorama",
+                    p.name()
+                ));
+            }
+        }
         if self.transport == Transport::Photon {
             self.photon.validate()?;
             if self.spp as u64 * self.photon.iterations as u64 > MAX_SPP as u64 {

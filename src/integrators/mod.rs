@@ -8,6 +8,7 @@ pub mod lines;
 pub mod overlay;
 pub mod photon;
 pub mod progressive;
+pub mod radiosity;
 pub mod recursive;
 pub mod vector_lines;
 pub mod wavefront;
@@ -61,10 +62,16 @@ pub fn accumulate(pixel: &mut PixelSum, sample: Color, counters: &mut RenderCoun
     }
 }
 
-/// Prepares camera rays for the settings' image size, in the frame of
-/// `scene`'s render origin.
+/// Prepares camera rays for the settings' image size and projection, in
+/// the frame of `scene`'s render origin.
 pub fn camera_rays(scene: &RenderScene, camera: &Camera, settings: &RenderSettings) -> CameraRays {
-    CameraRays::relative_to(camera, scene.origin(), settings.width, settings.height)
+    CameraRays::panoramic(
+        camera,
+        scene.origin(),
+        settings.width,
+        settings.height,
+        settings.panorama,
+    )
 }
 
 /// Which integrator renders the image.

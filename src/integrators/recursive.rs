@@ -139,6 +139,10 @@ pub fn pixel_sample(
         Transport::Path | Transport::Photon => {
             trace_path(scene, settings, &ray, cam.cone(), &mut sampler, counters)
         }
+        // Radiosity frames need their solution and are rendered by
+        // `integrators::radiosity`; without one, surfaces show as Whitted
+        // transport sees them.
+        Transport::Radiosity => trace(scene, settings, &ray, 0, Color::ONE, counters),
     }
 }
 

@@ -81,6 +81,14 @@ pub struct SettingsDesc {
     pub lines: Option<crate::core::settings::LineSettings>,
     /// Random numbers.
     pub sampler: Option<crate::core::rng::SamplerKind>,
+    /// Radiosity's options (each optional).
+    pub radiosity: crate::core::radiosity::RadiosityDesc,
+    /// Camera projection: `Some(None)` is the perspective camera,
+    /// `Some(Some(p))` a panorama.
+    pub panorama: Option<Option<crate::core::settings::Panorama>>,
+    /// The light-field capture rig (`[lightfield]`), for `prism lightfield
+    /// capture`; not part of [`SettingsDesc::resolve`].
+    pub lightfield: Option<crate::core::settings::LightFieldSettings>,
     /// Photon mapping's parameters, each optional.
     pub photon: crate::core::photon_settings::PhotonOverrides,
 }
@@ -114,6 +122,8 @@ impl SettingsDesc {
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),
             lines: self.lines.or(under.lines),
             sampler: self.sampler.or(under.sampler).unwrap_or(d.sampler),
+            radiosity: self.radiosity.resolve(&under.radiosity),
+            panorama: self.panorama.or(under.panorama).unwrap_or(d.panorama),
             photon: self.photon.or(under.photon).resolve(),
         }
     }
@@ -169,8 +179,9 @@ impl SceneDesc {
     }
 
     /// True when the scene is lit under `transport`: it has a punctual
-    /// light; or, under path and photon transport (where emissive surfaces
-    /// are area lights and emit photons), an emissive surface; or, under
+    /// light; or, under path, photon and radiosity transport (where
+    /// emissive surfaces are area lights, emit photons or are the
+    /// solution's sources), an emissive surface; or, under
     /// path transport (the only one that samples it as a light), an
     /// environment.
     pub fn is_lit(&self, transport: crate::core::settings::Transport) -> bool {
@@ -181,7 +192,10 @@ impl SceneDesc {
                 .any(|o| o.material.emission.max_element() > 0.0)
         };
         !self.lights.is_empty()
-            || (matches!(transport, Transport::Path | Transport::Photon) && emissive())
+            || (matches!(
+                transport,
+                Transport::Path | Transport::Photon | Transport::Radiosity
+            ) && emissive())
             || (transport == Transport::Path && self.environment.is_some())
     }
 

@@ -40,6 +40,17 @@ struct FileScene {
     #[serde(default)]
     gltf: Vec<FileInclude>,
     environment: Option<FileEnvironment>,
+    lightfield: Option<FileLightField>,
+}
+
+/// `[lightfield]`: the capture rig of `prism lightfield capture`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileLightField {
+    grid: Option<[u32; 2]>,
+    spacing: Option<f64>,
+    resolution: Option<[u32; 2]>,
+    focal_distance: Option<f64>,
 }
 
 /// `[environment]`: an equirectangular map (`path`) or a uniform `color`,
@@ -80,6 +91,10 @@ struct FileSettings {
     lines: Option<FileLines>,
     /// `"sobol"` or `"hash"`.
     sampler: Option<FileSampler>,
+    /// Radiosity's options (`[settings.radiosity]`).
+    radiosity: Option<crate::core::radiosity::RadiosityDesc>,
+    /// `"perspective"`, `"equirect"` or `"cubemap"`.
+    camera_projection: Option<FileProjection>,
     /// Photon mapping (each optional).
     photon: Option<FilePhoton>,
 }
@@ -92,6 +107,14 @@ struct FilePhoton {
     alpha: Option<f32>,
     iterations: Option<u32>,
     gather_rays: Option<u32>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+enum FileProjection {
+    Perspective,
+    Equirect,
+    Cubemap,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -130,6 +153,7 @@ struct FileLines {
 enum FileTransport {
     Whitted,
     Path,
+    Radiosity,
     Photon,
 }
 
@@ -149,6 +173,9 @@ struct FileCamera {
     up: [f32; 3],
     #[serde(default = "default_vfov")]
     vfov: f32,
+    /// Lens shift `[right, up]` in image heights.
+    #[serde(default)]
+    shift: [f32; 2],
     /// Thin lens: aperture radius in scene units (0: pinhole).
     aperture_radius: Option<f32>,
     /// Thin lens: f-number (see `Camera::set_f_number`).
@@ -441,6 +468,17 @@ impl Ctx<'_> {
             settings: self.settings(&file.settings)?,
             ..Default::default()
         };
+        if let Some(l) = &file.lightfield {
+            let l = crate::core::settings::LightFieldSettings {
+                grid: l.grid,
+                spacing: l.spacing,
+                resolution: l.resolution,
+                focal_distance: l.focal_distance,
+            };
+            l.validate()
+                .map_err(|m| self.err(format!("lightfield: {m}")))?;
+            scene.settings.lightfield = Some(l);
+        }
         if let Some(bg) = file.settings.background {
             scene.background =
                 non_negative("settings.background", Color::from(bg)).map_err(|m| self.err(m))?;
@@ -568,6 +606,7 @@ impl Ctx<'_> {
             transport: s.transport.map(|t| match t {
                 FileTransport::Whitted => crate::core::settings::Transport::Whitted,
                 FileTransport::Path => crate::core::settings::Transport::Path,
+                FileTransport::Radiosity => crate::core::settings::Transport::Radiosity,
                 FileTransport::Photon => crate::core::settings::Transport::Photon,
             }),
             light_samples: s.light_samples,
@@ -587,6 +626,13 @@ impl Ctx<'_> {
                 FileSampler::Sobol => crate::core::rng::SamplerKind::Sobol,
                 FileSampler::Hash => crate::core::rng::SamplerKind::Hash,
             }),
+            radiosity: s.radiosity.unwrap_or_default(),
+            panorama: s.camera_projection.map(|p| match p {
+                FileProjection::Perspective => None,
+                FileProjection::Equirect => Some(crate::core::settings::Panorama::Equirect),
+                FileProjection::Cubemap => Some(crate::core::settings::Panorama::Cubemap),
+            }),
+            lightfield: None,
         })
     }
 
@@ -596,6 +642,7 @@ impl Ctx<'_> {
             look_at: finite3d("camera.look_at", c.look_at)?,
             up: finite3("camera.up", c.up)?,
             vfov_degrees: c.vfov,
+            shift: glam::Vec2::from(c.shift),
             name: None,
             focus_distance: c.focus_distance.unwrap_or(0.0),
             ..Default::default()

@@ -1,10 +1,14 @@
 //! Cameras: pinhole, thin lens (depth of field) and orthographic rays
-//! through an image plane, and the automatic framing of a scene's bounds.
+//! through an image plane, panoramas in every direction
+//! ([`crate::scene::panorama`]), and the automatic framing of a scene's
+//! bounds.
 
 use bevy_ecs::component::Component;
 use glam::{DMat3, DVec3, DVec4, Mat3A, Vec2, Vec3, Vec3A};
 
 use crate::core::math::Ray;
+use crate::core::settings::Panorama;
+use crate::scene::panorama::PanoramaRays;
 
 /// How a camera projects the world onto its image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,6 +42,13 @@ pub struct Camera {
     pub up: Vec3,
     /// Vertical field of view in degrees (perspective projection).
     pub vfov_degrees: f32,
+    /// Lens shift: the image window slides in its own plane, right by
+    /// `shift.x` and up by `shift.y` image heights, while the eye and the
+    /// viewing direction stay put (an off-axis view, as a shift lens or
+    /// Blender's camera shift, relative to the height here). Zero is the
+    /// usual centred view; light-field cameras use it so that every view
+    /// frames the same window of the focal plane.
+    pub shift: Vec2,
     /// Radius of the thin lens's aperture in world units; 0 (the default)
     /// is a pinhole, whose image is sharp at every depth.
     pub lens_radius: f32,
@@ -58,6 +69,7 @@ impl Default for Camera {
             look_at: DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 40.0,
+            shift: Vec2::ZERO,
             lens_radius: 0.0,
             focus_distance: 0.0,
             projection: Projection::Perspective,
@@ -90,6 +102,9 @@ impl Camera {
                 "camera vertical field of view must be in (0, 180) degrees, got {}",
                 self.vfov_degrees
             ));
+        }
+        if !self.shift.is_finite() {
+            return Err(format!("camera shift must be finite, got {}", self.shift));
         }
         if !(self.lens_radius.is_finite() && self.lens_radius >= 0.0) {
             return Err(format!(
@@ -179,6 +194,8 @@ pub struct CameraRays {
     dx: Vec3A,
     /// Step per pixel downwards.
     dy: Vec3A,
+    /// A panorama instead of the image plane (`None`: perspective).
+    panorama: Option<PanoramaRays>,
     /// Unit right and up vectors of the lens plane, scaled by the lens
     /// radius (zero for a pinhole).
     lens_u: Vec3A,
@@ -220,7 +237,11 @@ impl CameraRays {
             }
         };
         let half_w = half_h * width as f32 / height as f32;
-        let top_left = plane_centre - right * half_w + up * half_h;
+        // The window's centre, moved by the shift (in image heights).
+        let centre = plane_centre
+            + right * (2.0 * half_h * camera.shift.x)
+            + up * (2.0 * half_h * camera.shift.y);
+        let top_left = centre - right * half_w + up * half_h;
         let lens = camera.lens_radius;
         Self {
             origin: (camera.look_from - origin).as_vec3a(),
@@ -232,7 +253,41 @@ impl CameraRays {
             forward: forward.into(),
             focus: camera.focal_distance(),
             ortho_forward,
+            panorama: None,
         }
+    }
+
+    /// Prepares `camera` for a `width` x `height` panorama of kind
+    /// `panorama` in the frame centred on `origin`, or for its perspective
+    /// view when `panorama` is `None` (exactly
+    /// [`CameraRays::relative_to`]). The panorama's map frame is the
+    /// camera's: `+X` its viewing direction, `+Y` its up, `+Z` its right
+    /// (see [`crate::scene::panorama`]); the field of view is not used.
+    pub fn panoramic(
+        camera: &Camera,
+        origin: DVec3,
+        width: u32,
+        height: u32,
+        panorama: Option<Panorama>,
+    ) -> Self {
+        let mut rays = Self::relative_to(camera, origin, width, height);
+        if let Some(kind) = panorama {
+            let forward = (camera.look_at - camera.look_from).normalize().as_vec3();
+            let right = forward.cross(camera.up).normalize();
+            let up = right.cross(forward);
+            rays.panorama = Some(PanoramaRays::new(
+                kind,
+                [forward.into(), up.into(), right.into()],
+                width,
+                height,
+            ));
+        }
+        rays
+    }
+
+    /// The panorama these rays cover, if they are panoramic.
+    pub fn panorama(&self) -> Option<&PanoramaRays> {
+        self.panorama.as_ref()
     }
 
     /// The ray through film position `p` in pixels (`(0,0)` is the top-left
@@ -241,6 +296,9 @@ impl CameraRays {
     /// length.
     #[inline]
     pub fn ray(&self, p: Vec2) -> Ray {
+        if let Some(pano) = &self.panorama {
+            return Ray::new(self.origin, pano.direction(p));
+        }
         let d = self.top_left + self.dx * p.x + self.dy * p.y;
         match self.ortho_forward {
             None => Ray::new(self.origin, d.normalize()),
@@ -284,7 +342,8 @@ impl CameraRays {
     #[inline]
     pub fn lens_ray(&self, p: Vec2, lens: Vec2) -> Ray {
         let pinhole = self.ray(p);
-        if !self.has_lens() {
+        // Panoramas are pinholes: every direction from one eye.
+        if !self.has_lens() || self.panorama.is_some() {
             return pinhole;
         }
         let disk = crate::core::sampling::concentric_disk(lens);

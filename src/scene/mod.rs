@@ -9,6 +9,7 @@ pub mod features;
 pub mod instance;
 pub mod light;
 pub mod material;
+pub mod panorama;
 pub mod query;
 pub mod render_scene;
 pub mod update;

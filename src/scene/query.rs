@@ -67,18 +67,7 @@ impl RenderScene {
         if self.has_alpha(inst) {
             return self.intersect_cut_out::<AVX>(index, ray, t_min, t_max, brute_force);
         }
-        let local = to_object(inst, ray);
-        match &inst.geometry {
-            InstanceGeometry::Shape(s) => s
-                .intersect(&local, t_min, t_max)
-                .map(|h| (h.t, LocalHit::shape(&h))),
-            InstanceGeometry::Mesh(m) => if brute_force {
-                m.intersect_brute_force(&local, t_min, t_max)
-            } else {
-                m.intersect_kernel::<AVX>(&local, t_min, t_max)
-            }
-            .map(|h| (h.t, LocalHit::Mesh(h))),
-        }
+        closest_in_geometry::<AVX>(inst, &to_object(inst, ray), t_min, t_max, brute_force)
     }
 
     /// [`RenderScene::intersect_instance_with`] for an instance whose
@@ -100,17 +89,7 @@ impl RenderScene {
         let local = to_object(inst, ray);
         let mut t_min = t_min;
         loop {
-            let (t, h) = match &inst.geometry {
-                InstanceGeometry::Shape(s) => s
-                    .intersect(&local, t_min, t_max)
-                    .map(|h| (h.t, LocalHit::shape(&h))),
-                InstanceGeometry::Mesh(m) => if brute_force {
-                    m.intersect_brute_force(&local, t_min, t_max)
-                } else {
-                    m.intersect_kernel::<AVX>(&local, t_min, t_max)
-                }
-                .map(|h| (h.t, LocalHit::Mesh(h))),
-            }?;
+            let (t, h) = closest_in_geometry::<AVX>(inst, &local, t_min, t_max, brute_force)?;
             if !self.cut_away(inst, ray, t, &h) {
                 return Some((t, h));
             }
@@ -667,4 +646,28 @@ fn ray_hash(ray: &Ray, t: f32) -> f32 {
     h = (h ^ (h >> 32)).wrapping_mul(0x94d0_49bb_1331_11eb);
     h ^= h >> 31;
     (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+}
+
+/// The closest hit in `(t_min, t_max)` of an instance's own geometry along
+/// `local` (the ray in its object space), alpha ignored: the shape's test,
+/// or the mesh's structure (or every triangle, `brute_force`).
+#[inline(always)]
+fn closest_in_geometry<const AVX: bool>(
+    inst: &Instance,
+    local: &Ray,
+    t_min: f32,
+    t_max: f32,
+    brute_force: bool,
+) -> Option<(f32, LocalHit)> {
+    match &inst.geometry {
+        InstanceGeometry::Shape(s) => s
+            .intersect(local, t_min, t_max)
+            .map(|h| (h.t, LocalHit::shape(&h))),
+        InstanceGeometry::Mesh(m) => if brute_force {
+            m.intersect_brute_force(local, t_min, t_max)
+        } else {
+            m.intersect_kernel::<AVX>(local, t_min, t_max)
+        }
+        .map(|h| (h.t, LocalHit::Mesh(h))),
+    }
 }

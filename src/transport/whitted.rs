@@ -16,8 +16,10 @@ pub fn direct_light(it: &Interaction, light: &WorldLight) -> Option<ShadowQuery>
 }
 
 /// [`direct_light`] with another BRDF: `brdf_cos(wi)` is the BRDF times
-/// the cosine for the direction `wi` towards the light.
-#[inline]
+/// the cosine for the direction `wi` towards the light. Always inlined:
+/// as a call (with the BRDF as a closure) it cost Whitted scenes of many
+/// lights 3% more instructions (callgrind, `many_lights`).
+#[inline(always)]
 pub fn direct_light_with(
     it: &Interaction,
     light: &WorldLight,

@@ -5,6 +5,9 @@
 //! * `cargo test --test cli render::` — `prism render` and `prism bench`:
 //!   bad input gives a clear message and a non-zero exit, never a panic
 //!   or an output file; help, statistics and the benchmark's JSON;
+//! * `cargo test --test cli lightfield::` — `prism lightfield`: capture,
+//!   a grid view synthesised from the folder alone bit for bit, bad
+//!   folders and views refused;
 //! * `cargo test --test cli merge::` — `prism render --shard` and
 //!   `prism merge`: merged shards are the single render byte for byte, bad
 //!   sets of shards are refused naming the file, with nothing written;
@@ -15,6 +18,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod lightfield;
 mod merge;
 mod render;
 mod tools;

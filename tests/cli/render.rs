@@ -187,6 +187,7 @@ fn help_explains_every_option() {
         "--crease-angle",
         "--lines-svg",
         "--hidden-lines",
+        "--camera-projection",
         "--overlay",
         "--overlay-depth",
         "--overlay-svg",

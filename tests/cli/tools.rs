@@ -211,6 +211,11 @@ fn tradeoff(out: &Path, extra: &[&str]) -> Output {
             "8",
             "--reference-spp",
             "32",
+            // A coarse radiosity solve for the transport knob's row.
+            "--patch-size",
+            "1.4",
+            "--refine-levels",
+            "0",
             "-q",
         ])
         .args(extra)
@@ -249,9 +254,13 @@ fn tradeoff_writes_the_csv_and_plots() {
     assert_eq!(lines[0], HEADER);
     // The base, then every knob's values but the base's: spp 6 of 7, depth
     // 6 of 7, threshold 5 of 6, light samples 3 of 4, roulette 2 of 3,
-    // BVH 5 of 6, transport 2 of 3, sampler 1 of 2, accel 2 of 3 (the
-    // photon-iterations knob is not swept by default).
-    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 2 + 5 + 2 + 1 + 2);
+    // BVH 5 of 6, transport 3 of 4 (whitted, photon, radiosity), sampler
+    // 1 of 2, accel 2 of 3 (the photon-iterations knob is not swept by
+    // default).
+    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 2 + 5 + 3 + 1 + 2);
+    for t in ["transport,photon,", "transport,radiosity,"] {
+        assert!(lines.iter().any(|l| l.starts_with(t)), "no {t} row");
+    }
     assert!(lines[1].starts_with("base,,path,16,8,0.001,1,3,medium,recursive,"));
     let knobs: Vec<&str> = lines[1..]
         .iter()

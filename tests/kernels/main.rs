@@ -13,6 +13,9 @@
 //!   and vertices of closed meshes;
 //! * `cargo test --test kernels properties::` — property tests of the f32
 //!   shape kernels against f64 and of `offset_origin`;
+//! * `cargo test --test kernels radiosity::` — form factors, the furnace,
+//!   parallel plates and the solvers against closed forms and a dense
+//!   solve;
 //! * `cargo test --test kernels simd::` — the portable and the AVX2 code
 //!   paths give bit-identical hits in every traversal mode.
 
@@ -23,5 +26,6 @@ mod accel;
 mod bvh;
 mod clip;
 mod properties;
+mod radiosity;
 mod simd;
 mod watertight;

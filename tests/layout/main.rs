@@ -26,7 +26,9 @@ const LAYERS: &[(&str, u32)] = &[
     ("scene", 3),
     ("transport", 4),
     ("io", 4),
+    ("radiosity", 4),
     ("integrators", 5),
+    ("lightfield", 5),
     ("systems", 6),
 ];
 

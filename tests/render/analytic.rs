@@ -188,6 +188,7 @@ material = { color = 0.0, emission = [0, 0, 1] }
             look_at: glam::DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 20.0,
+            shift: glam::Vec2::ZERO,
             name: None,
             ..Default::default()
         },
@@ -259,6 +260,7 @@ illuminance = 3.0
             look_at: glam::DVec3::ZERO,
             up: Vec3::Y,
             vfov_degrees: 45.0,
+            shift: glam::Vec2::ZERO,
             name: None,
             ..Default::default()
         },
@@ -377,6 +379,7 @@ fn quadric_hit_points_lie_on_the_surface_so_shadow_rays_do_not_self_intersect() 
             look_at: glam::DVec3::new(0.0, 0.8, 0.0),
             up: Vec3::Y,
             vfov_degrees: 12.0,
+            shift: glam::Vec2::ZERO,
             name: None,
             ..Default::default()
         },

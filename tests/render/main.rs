@@ -11,6 +11,9 @@
 //!   answers (white furnace, area lights) and the Whitted tracer;
 //! * `cargo test --test render photon::` — photon transport against the
 //!   path tracer (Cornell box) and bit for bit across thread counts;
+//! * `cargo test --test render radiosity::` — radiosity transport: the
+//!   Cornell box against the path tracer, the solution reused while the
+//!   camera moves, thread-count independence, refused input;
 //! * `cargo test --test render robustness::` — numerical extremes (IOR,
 //!   total internal reflection, coincident surfaces, scale invariance);
 //! * `cargo test --test render wavefront::` — the wavefront integrator
@@ -21,6 +24,11 @@
 //!   written, read back and merged against the single render, bit for bit;
 //! * `cargo test --test render illustration::` — Gooch shading against its
 //!   closed form, feature lines and their vector (SVG) form;
+//! * `cargo test --test render panorama::` — equirectangular and cube-map
+//!   panoramas read back as environments, and against each other;
+//! * `cargo test --test render lightfield::` — views synthesised from
+//!   captured light fields against the captures and direct renders, and
+//!   bad light fields refused;
 //! * `cargo test --test render overlay::` — the structure overlays
 //!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
 //!   clipping and visibility against independent f64 and brute-force
@@ -36,10 +44,13 @@ mod analytic;
 mod environment;
 mod illustration;
 mod large_worlds;
+mod lightfield;
 mod models;
 mod overlay;
+mod panorama;
 mod path;
 mod photon;
+mod radiosity;
 mod robustness;
 mod scene_updates;
 mod shards;

@@ -133,6 +133,7 @@ fn floor_scene(light: &str) -> (String, Camera) {
         look_at: glam::DVec3::ZERO,
         up: Vec3::Z,
         vfov_degrees: 60.0,
+        shift: glam::Vec2::ZERO,
         name: None,
         ..Default::default()
     };

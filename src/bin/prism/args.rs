@@ -107,6 +107,42 @@ pub enum SamplerArg {
     Hash,
 }
 
+/// `--camera-projection` (render, lightfield).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct ProjectionFlag {
+    /// Camera projection: `perspective`, or a panorama of every direction
+    /// around the eye: `equirect` (latitude-longitude, the environment
+    /// map's layout; 2:1 images) or `cubemap` (six square faces side by
+    /// side, +X -X +Y -Y +Z -Z of the camera frame; width = 6 x height).
+    /// The panorama's +X is the camera's view direction, +Y its up
+    /// [default: the scene's, else perspective].
+    #[arg(long, value_enum, value_name = "PROJECTION")]
+    pub camera_projection: Option<ProjectionArg>,
+}
+
+impl ProjectionFlag {
+    /// The projection asked for, if one was: `Some(None)` is perspective.
+    pub fn get(&self) -> Option<Option<prism::core::settings::Panorama>> {
+        use prism::core::settings::Panorama;
+        self.camera_projection.map(|p| match p {
+            ProjectionArg::Perspective => None,
+            ProjectionArg::Equirect => Some(Panorama::Equirect),
+            ProjectionArg::Cubemap => Some(Panorama::Cubemap),
+        })
+    }
+}
+
+/// `--camera-projection`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProjectionArg {
+    /// The scene camera's perspective view.
+    Perspective,
+    /// Latitude-longitude panorama (360 x 180 degrees).
+    Equirect,
+    /// Six cube faces in a horizontal strip.
+    Cubemap,
+}
+
 /// `--threads` (render, bench, tradeoff).
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct ThreadsFlag {
@@ -274,6 +310,9 @@ pub enum TransportArg {
     /// Path tracing with next-event estimation and MIS; emissive surfaces
     /// are area lights.
     Path,
+    /// Radiosity: diffuse interreflection between patches, solved once,
+    /// then viewed (see the --radiosity-* and --patch-size options).
+    Radiosity,
     /// Progressive photon mapping: caustic and global photon maps from
     /// every light, read at diffuse surfaces (recursive integrator).
     Photon,
@@ -284,6 +323,7 @@ impl From<TransportArg> for Transport {
         match a {
             TransportArg::Whitted => Transport::Whitted,
             TransportArg::Path => Transport::Path,
+            TransportArg::Radiosity => Transport::Radiosity,
             TransportArg::Photon => Transport::Photon,
         }
     }

@@ -15,6 +15,8 @@ struct Cli {
 mod args;
 mod bench;
 mod compare;
+mod lightfield;
+mod radiosity_args;
 mod rays;
 mod render;
 mod shard;
@@ -44,6 +46,11 @@ enum Command {
     /// into the whole image (.exr or .png), after checking that they are of
     /// one render and cover every pixel's samples exactly once.
     Merge(shard::MergeArgs),
+    /// Image-based rendering from a two-plane light field: `capture` a
+    /// grid of views of a scene, `render` new views from the images alone,
+    /// `compare` a new view with its direct render, `sweep` the grid
+    /// density.
+    Lightfield(lightfield::LightFieldArgs),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +61,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => compare::run(args),
         Command::Tradeoff(args) => tradeoff::run(args),
         Command::Merge(args) => shard::run_merge(args),
+        Command::Lightfield(args) => lightfield::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -186,6 +186,9 @@ pub struct RenderArgs {
     /// scene file's own camera first, then those of included glTF files).
     #[arg(long, default_value_t = 0)]
     camera: usize,
+    /// `--camera-projection`.
+    #[command(flatten)]
+    projection: crate::args::ProjectionFlag,
     /// `--look-from`, `--look-at`, `--fov` and the lens.
     #[command(flatten)]
     view: ViewFlags,
@@ -205,6 +208,9 @@ pub struct RenderArgs {
     /// `--light-samples`, `--rr-depth`.
     #[command(flatten)]
     path: PathFlags,
+    /// Radiosity's options.
+    #[command(flatten)]
+    radiosity: crate::radiosity_args::RadiosityFlags,
     /// `--photons`, `--photon-radius`, `--photon-alpha`,
     /// `--photon-iterations`, `--final-gather`.
     #[command(flatten)]
@@ -583,6 +589,8 @@ fn render_with_pool(
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
         sampler: args.path.sampler(),
+        radiosity: args.radiosity.desc(),
+        panorama: args.projection.get(),
         photon: args.photon.overrides(),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
@@ -623,6 +631,13 @@ fn render_with_pool(
             args.camera
         )));
     }
+    if let (Some(p), Some(_)) = (settings.panorama, &args.lines_svg) {
+        return Err(Error::Invalid(format!(
+            "--lines-svg projects onto the perspective camera's image; it does not combine \
+             with the {} panorama",
+            p.name()
+        )));
+    }
     args.view.apply(&mut desc.cameras[args.camera])?;
     let chosen = desc.cameras[args.camera].clone();
     if let Some(n) = desc.ensure_light(&chosen, settings.transport) {
@@ -652,6 +667,16 @@ fn render_with_pool(
         let f: systems::ProgressFn = Arc::new(move |n| b.inc(n));
         f
     });
+    // The radiosity solve has its own bar, above the render's.
+    let solve_bar = (settings.transport == prism::core::settings::Transport::Radiosity)
+        .then(|| {
+            progress_bar(
+                0,
+                args.quiet,
+                "{spinner} radiosity form factors, pass {msg} [{bar:40}] {pos}/{len} rows {elapsed_precise}",
+            )
+        })
+        .flatten();
     let mut renderer = Renderer::with_scene(
         desc,
         RenderConfig {
@@ -665,6 +690,21 @@ fn render_with_pool(
     )?;
     let batch_paths = args.batch_paths.get()?;
     renderer.insert_resource(BatchSize(batch_paths));
+    if let Some(b) = solve_bar.clone() {
+        let pass = std::sync::atomic::AtomicU64::new(0);
+        let f: systems::radiosity::SolveProgressFn = Arc::new(move |done, total| {
+            if b.length() != Some(total) || done < b.position() {
+                let p = pass.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                b.set_message(p.to_string());
+                b.set_length(total);
+            }
+            b.set_position(done);
+        });
+        renderer
+            .world_mut()
+            .resource_mut::<systems::radiosity::RadiosityState>()
+            .progress = Some(f);
+    }
     if args.render_origin == RenderOriginArg::World {
         renderer.insert_resource(systems::RenderOrigin::Fixed(glam::DVec3::ZERO));
     }
@@ -672,6 +712,13 @@ fn render_with_pool(
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    if let Some(b) = &solve_bar {
+        b.finish_and_clear();
+    }
+    let radiosity = renderer
+        .world()
+        .get_resource::<systems::radiosity::RadiosityState>()
+        .and_then(|r| r.solution.as_ref().map(|s| s.stats));
 
     let accel = renderer.world().resource::<SceneAccel>();
     let tlas_seconds = accel.build_seconds;
@@ -786,6 +833,8 @@ fn render_with_pool(
         nonfinite_samples: frame.counters.nonfinite_samples,
         line_seconds: frame.lines.as_ref().map(|_| frame.line_seconds),
         line_rays: frame.lines.as_ref().map(|_| frame.line_rays),
+        radiosity: radiosity
+            .filter(|_| settings.transport == prism::core::settings::Transport::Radiosity),
         photon: frame.photon,
         wavefront: frame.wavefront.map(|w| WavefrontStatsJson {
             stage_seconds: w.stages,
@@ -816,6 +865,24 @@ fn render_with_pool(
                 String::new()
             }
         );
+        if let Some(r) = &stats.radiosity {
+            eprintln!(
+                "radiosity: {} patches ({} passes, {} split), {} iterations to residual {:.2e}{}, \
+                 form factors {:.3} s ({} entries, {:.1} MB), solve {:.3} s, total {:.3} s, peak {:.1} MB",
+                r.patches,
+                r.passes,
+                r.refined,
+                r.iterations,
+                r.residual,
+                if r.converged { "" } else { " (NOT converged)" },
+                r.form_factor_seconds,
+                r.form_factors,
+                r.form_factor_bytes as f64 / 1e6,
+                r.solve_seconds,
+                r.total_seconds,
+                r.peak_bytes as f64 / 1e6
+            );
+        }
     }
     Ok(())
 }

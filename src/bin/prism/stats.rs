@@ -78,6 +78,10 @@ pub struct RenderStats {
     /// Rays cast by the feature-line stage (not in `rays`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub line_rays: Option<u64>,
+    /// Radiosity only: patches, iterations, residual, time and memory of
+    /// the solve.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radiosity: Option<prism::radiosity::RadiosityStats>,
     /// Wavefront only: time per stage and queue memory.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wavefront: Option<WavefrontStatsJson>,

@@ -321,20 +321,30 @@ pub struct EscapedQueue {
     pub throughput: Vec<Color>,
     /// Path indices.
     pub path: Vec<u32>,
-    /// Directions (unit), where the environment is looked up.
+    /// Directions (unit), where the environment is looked up; empty when
+    /// the scene has no environment (then nothing reads them).
     pub direction: Vec<Vec3A>,
     /// Direction densities (path tracing; see [`RayItem::pdf`]), for
-    /// multiple importance sampling of the environment.
+    /// multiple importance sampling of the environment; empty like
+    /// `direction`.
     pub pdf: Vec<f32>,
 }
 
 impl EscapedQueue {
-    /// Appends an escaped ray.
+    /// Appends an escaped ray of a scene without an environment (it
+    /// brings back the constant background).
     #[inline]
-    pub fn push(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
+    pub fn push(&mut self, path: u32, throughput: Color) {
         debug_assert!(throughput.is_finite());
         self.throughput.push(throughput);
         self.path.push(path);
+    }
+
+    /// Appends an escaped ray with the direction and density the
+    /// environment is looked up and weighted with.
+    #[inline]
+    pub fn push_toward(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
+        self.push(path, throughput);
         self.direction.push(direction);
         self.pdf.push(pdf);
     }

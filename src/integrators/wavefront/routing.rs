@@ -55,23 +55,27 @@ impl RoutedChunk {
     }
 
     /// Routes ray `i` of `rays` after its closest-hit test: a miss to the
-    /// escaped queue, a hit to the queue of its material's class
-    /// (`classes` holds the class of each material).
+    /// escaped queue (with its direction and density when
+    /// `environment`: only an environment reads them), a hit to the queue
+    /// of its material's class (`classes` holds the class of each
+    /// material).
     #[inline]
     pub fn route(
         &mut self,
         classes: &[MaterialClass],
+        environment: bool,
         rays: &RayQueue,
         i: usize,
         found: Option<Hit>,
     ) {
         match found {
-            None => self.escaped.push(
+            None if environment => self.escaped.push_toward(
                 rays.path[i],
                 rays.throughput[i],
                 rays.direction[i],
                 rays.pdf[i],
             ),
+            None => self.escaped.push(rays.path[i], rays.throughput[i]),
             Some(h) => {
                 let class = classes[h.material as usize];
                 self.hits.0[class as usize].push(HitItem::new(&h, &rays.get(i)));

@@ -98,6 +98,7 @@ pub fn intersect_closest(
     // are traced one at a time. Measured faster than mesh streams for
     // camera and for secondary rays since meshes have their own 8-wide
     // layout (README, "Measurement notes").
+    let environment = scene.environment().is_some();
     let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
         let IntersectChunk { routed } = chunk;
         routed.clear();
@@ -115,7 +116,7 @@ pub fn intersect_closest(
                     }
                 }
             }
-            routed.route(classes, rays, i, found[lane]);
+            routed.route(classes, environment, rays, i, found[lane]);
         }
     });
     join_routed(chunks.iter().map(|c| &c.routed), escaped, hits);

@@ -87,6 +87,7 @@ pub(super) fn convert_camera(
         look_at: position + forward,
         up,
         vfov_degrees: yfov.to_degrees(),
+        shift: glam::Vec2::ZERO,
         projection,
         name: camera.name().map(str::to_string),
         ..Default::default()

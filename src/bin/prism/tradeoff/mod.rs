@@ -29,7 +29,7 @@ use crate::args::{
     FrameFlags, IntegratorFlag, MinContributionFlag, PathFlags, PhotonFlags, SeedFlag, ThreadsFlag,
 };
 
-mod plot;
+pub(crate) mod plot;
 
 /// Options of `prism tradeoff`.
 ///
@@ -96,6 +96,9 @@ pub struct TradeoffArgs {
     /// `transport` and `photon-iterations` knobs).
     #[command(flatten)]
     pub photon: PhotonFlags,
+    /// Radiosity's settings for the radiosity row of the `transport` knob.
+    #[command(flatten)]
+    pub radiosity: crate::radiosity_args::RadiosityFlags,
     /// `--integrator`.
     #[command(flatten)]
     pub integrator: IntegratorFlag,
@@ -130,7 +133,7 @@ pub enum Knob {
     RussianRoulette,
     /// BVH build preset, fastest to very slow (the scene is reloaded).
     Bvh,
-    /// Light transport: Whitted, path tracing, photon mapping.
+    /// Light transport: Whitted, path tracing, photon mapping, radiosity.
     Transport,
     /// Random numbers: Owen-scrambled Sobol against independent hashes.
     Sampler,
@@ -194,7 +197,12 @@ const BVH_VALUES: [BuildQuality; 6] = [
 /// Structures over mesh triangles swept by the `accel` knob (brute force
 /// is left out: hours on any real mesh).
 const ACCEL_VALUES: [Accel; 3] = [Accel::Bvh, Accel::Kdtree, Accel::Grid];
-const TRANSPORT_VALUES: [Transport; 3] = [Transport::Whitted, Transport::Path, Transport::Photon];
+const TRANSPORT_VALUES: [Transport; 4] = [
+    Transport::Whitted,
+    Transport::Path,
+    Transport::Photon,
+    Transport::Radiosity,
+];
 const PHOTON_ITERATION_VALUES: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
 const SAMPLER_VALUES: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Hash];
 
@@ -468,6 +476,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         rr_start_depth: args.path.rr_depth.map(Some),
         sampler: args.path.sampler(),
         photon: args.photon.overrides(),
+        radiosity: args.radiosity.desc(),
         ..args.frame.desc()
     }
     .resolve(&base_desc.settings);
@@ -605,7 +614,20 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
             }
             &loaded.as_ref().expect("just loaded").1
         };
-        let (film, seconds, rays) = render(desc, &p.config, integrator, args.runs, &bar)?;
+        let (film, seconds, rays) = match render(desc, &p.config, integrator, args.runs, &bar) {
+            Ok(r) => r,
+            // Radiosity holds only polygons, meshes and emissive surfaces:
+            // other scenes leave its row out rather than the whole sweep.
+            Err(e) if p.config.settings.transport == Transport::Radiosity => {
+                if let Some(b) = &bar {
+                    b.suspend(|| eprintln!("warning: no radiosity row: {e}"));
+                } else if !args.quiet {
+                    eprintln!("warning: no radiosity row: {e}");
+                }
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
         let metrics = metrics::compare(&film, &reference, &display)?;
         rows.push(Row {
             planned: p,
@@ -697,7 +719,7 @@ mod tests {
         assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
         assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
         assert_eq!(count("accel"), ACCEL_VALUES.len() - 1);
-        assert_eq!(count("transport"), 2);
+        assert_eq!(count("transport"), TRANSPORT_VALUES.len() - 1);
         assert_eq!(count("photon-iterations"), PHOTON_ITERATION_VALUES.len());
         assert_eq!(count("sampler"), 1);
         for x in &p[1..] {
