@@ -142,7 +142,7 @@ pub fn pixel_sample(
         // Radiosity frames need their solution and are rendered by
         // `integrators::radiosity`; without one, surfaces show as Whitted
         // transport sees them.
-        Transport::Radiosity => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Radiosity => trace(scene, settings, &ray, cam.cone(), 0, Color::ONE, counters),
     }
 }
 
