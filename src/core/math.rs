@@ -33,6 +33,41 @@ impl Ray {
     }
 }
 
+/// A ray cone (Akenine-Möller et al., "Texture Level of Detail Strategies
+/// for Real-Time Ray Tracing", Ray Tracing Gems 2019): the footprint a
+/// ray stands for, a cone of `width` at the ray's origin widening by
+/// `spread` (radians, small-angle) per unit of distance. Texture lookups
+/// at a hit pick their mipmap level from the cone's width there.
+///
+/// Camera rays get the pixel's cone ([`crate::scene::camera::CameraRays::cone`]);
+/// perfectly specular reflection and refraction carry the cone on
+/// (surface curvature is ignored); any other bounce drops it
+/// ([`RayCone::NONE`]), so those lookups read the full-resolution texture.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RayCone {
+    /// Width of the footprint at the ray's origin (world units).
+    pub width: f32,
+    /// Growth of the width per unit of distance.
+    pub spread: f32,
+}
+
+impl RayCone {
+    /// No footprint: lookups read the full-resolution texture.
+    pub const NONE: RayCone = RayCone {
+        width: 0.0,
+        spread: 0.0,
+    };
+
+    /// The cone after travelling `distance`: its width there, same spread.
+    #[inline]
+    pub fn at(self, distance: f32) -> RayCone {
+        RayCone {
+            width: self.width + self.spread * distance,
+            spread: self.spread,
+        }
+    }
+}
+
 /// Builds an orthonormal basis `(t, b)` around the unit vector `n`
 /// (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
 #[inline]

@@ -701,6 +701,24 @@ impl Mesh {
         }
     }
 
+    /// The derivatives `(dP/du, dP/dv)` of the surface point with respect
+    /// to the texture coordinates over `triangle` (object space; texture
+    /// level of detail), or `None` without texture coordinates or for a
+    /// triangle whose texture coordinates are degenerate.
+    pub fn uv_tangents(&self, triangle: u32) -> Option<(Vec3A, Vec3A)> {
+        let uvs = self.uvs.as_ref()?;
+        let [i0, i1, i2] = self.triangles[triangle as usize].map(|i| i as usize);
+        let [p0, p1, p2] = self.corners[triangle as usize];
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let (d1, d2) = (uvs[i1] - uvs[i0], uvs[i2] - uvs[i0]);
+        let det = d1.x * d2.y - d2.x * d1.y;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let inv = 1.0 / det;
+        Some(((e1 * d2.y - e2 * d1.y) * inv, (e2 * d1.x - e1 * d2.x) * inv))
+    }
+
     /// Adds vertex tangents for normal mapping: `given` (glTF `TANGENT`,
     /// one per vertex, checked: finite, `w` = ±1) or, when `None`, tangents
     /// generated from the texture coordinates: per triangle the direction

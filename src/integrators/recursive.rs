@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
-use crate::core::math::{Color, Ray, max_component};
+use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
@@ -18,13 +18,15 @@ use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
-/// Radiance arriving along `ray`; `depth` is the number of bounces so far
+/// Radiance arriving along `ray`, whose ray cone is `cone` (texture level
+/// of detail); `depth` is the number of bounces so far
 /// and `throughput` the weight this radiance will be multiplied by on its
 /// way to the camera (used for the contribution threshold).
 pub fn trace(
     scene: &RenderScene,
     settings: &RenderSettings,
     ray: &Ray,
+    cone: RayCone,
     depth: u32,
     throughput: Color,
     counters: &mut RenderCounters,
@@ -32,7 +34,7 @@ pub fn trace(
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
         return scene.escaped_radiance(ray.direction);
     };
-    let it = Interaction::new(scene, ray, &hit);
+    let it = Interaction::with_cone(scene, ray, &hit, cone);
     // A segment that ran through an absorbing interior carries its
     // transmittance to everything seen at its end.
     let interior = interior_transmittance(&it, hit.t * ray.direction.length());
@@ -61,7 +63,7 @@ pub fn trace(
                 RayKind::Refraction => counters.rays.refraction += 1,
                 RayKind::Camera => counters.rays.camera += 1,
             }
-            radiance += s.weight * trace(scene, settings, &s.ray, depth + 1, t, counters);
+            radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
         }
     }
     interior.map_or(radiance, |tr| radiance * tr)
@@ -69,16 +71,18 @@ pub fn trace(
 
 /// Radiance along a camera ray by path tracing: a loop, one vertex per
 /// bounce, with next-event estimation at every vertex and multiple
-/// importance sampling of emission found by scattered rays.
+/// importance sampling of emission found by scattered rays. `cone` is the
+/// camera ray's cone (texture level of detail).
 pub fn trace_path(
     scene: &RenderScene,
     settings: &RenderSettings,
     camera_ray: &Ray,
+    cone: RayCone,
     sampler: &mut Sampler,
     counters: &mut RenderCounters,
 ) -> Color {
     let lambda = path::path_wavelength(scene, settings, sampler);
-    let l = trace_path_at(scene, settings, camera_ray, sampler, lambda, counters);
+    let l = trace_path_at(scene, settings, camera_ray, cone, sampler, lambda, counters);
     path::weigh_wavelength(l, lambda)
 }
 
@@ -88,6 +92,7 @@ fn trace_path_at(
     scene: &RenderScene,
     settings: &RenderSettings,
     camera_ray: &Ray,
+    cone: RayCone,
     sampler: &mut Sampler,
     lambda: Option<f32>,
     counters: &mut RenderCounters,
@@ -95,6 +100,7 @@ fn trace_path_at(
     let mut radiance = Color::ZERO;
     let mut throughput = Color::ONE;
     let mut ray = *camera_ray;
+    let mut cone = cone;
     let mut prev_pdf = 0.0;
     let mut depth = 0;
     loop {
@@ -102,7 +108,7 @@ fn trace_path_at(
             radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
             return radiance;
         };
-        let mut it = Interaction::new(scene, &ray, &hit);
+        let mut it = Interaction::with_cone(scene, &ray, &hit, cone);
         path::at_wavelength(&mut it, lambda);
         let distance = hit.t * ray.direction.length();
         if let Some(tr) = interior_transmittance(&it, distance) {
@@ -127,6 +133,7 @@ fn trace_path_at(
         }
         throughput = throughput * c.sample.weight * c.scale;
         ray = c.sample.ray;
+        cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;
     }
@@ -151,16 +158,16 @@ pub fn pixel_sample(
     let ray = camera_ray(cam, x, y, spp, &mut sampler);
     counters.rays.camera += 1;
     match settings.transport {
-        Transport::Whitted => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Whitted => trace(scene, settings, &ray, cam.cone(), 0, Color::ONE, counters),
         // A lone sample has no photon maps: photon transport renders through
         // `integrators::photon`; here it falls back to path tracing.
         Transport::Path | Transport::Photon => {
-            trace_path(scene, settings, &ray, &mut sampler, counters)
+            trace_path(scene, settings, &ray, cam.cone(), &mut sampler, counters)
         }
         // Radiosity frames need their solution and are rendered by
         // `integrators::radiosity`; without one, surfaces show as Whitted
         // transport sees them.
-        Transport::Radiosity => trace(scene, settings, &ray, 0, Color::ONE, counters),
+        Transport::Radiosity => trace(scene, settings, &ray, cam.cone(), 0, Color::ONE, counters),
     }
 }
 

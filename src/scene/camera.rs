@@ -322,6 +322,26 @@ impl CameraRays {
         self.lens_u != Vec3A::ZERO
     }
 
+    /// The ray cone of a camera ray (texture level of detail): one pixel's
+    /// footprint. A perspective camera's cone starts at the eye with a
+    /// spread of one pixel's angle at the image centre; an orthographic
+    /// camera's rays are parallel, so its cone is one pixel wide and does
+    /// not spread. A lens is ignored (the pinhole's footprint is used).
+    #[inline]
+    pub fn cone(&self) -> crate::core::math::RayCone {
+        let pixel = self.dy.length();
+        match self.ortho_forward {
+            None => crate::core::math::RayCone {
+                width: 0.0,
+                spread: pixel,
+            },
+            Some(_) => crate::core::math::RayCone {
+                width: pixel,
+                spread: 0.0,
+            },
+        }
+    }
+
     /// The ray through film position `p` from lens point `lens` (a uniform
     /// sample of the unit square, mapped concentrically onto the unit disk
     /// and scaled by the lens radius): it starts on the lens and passes

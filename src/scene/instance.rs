@@ -109,6 +109,11 @@ pub struct Hit {
     pub shading_normal: Vec3A,
     /// Texture coordinates.
     pub uv: Vec2,
+    /// Texture coordinates per unit of world length at the hit: the square
+    /// root of the texture area per world area of the surface (texture
+    /// level of detail), or 0 where it is not derived or not needed (an
+    /// untextured material; then lookups read the full-resolution texture).
+    pub uv_density: f32,
     /// Instance index.
     pub instance: u32,
     /// Material index.

@@ -28,6 +28,112 @@ pub struct ImageTexture {
     /// Row-major alpha (coverage) of each texel, or empty when the image
     /// has no alpha channel (opaque).
     pub alpha: Vec<f32>,
+    /// The mipmap levels below the full-resolution image: level `k` (at
+    /// index `k - 1`) halves level `k - 1` in each dimension (rounded
+    /// down, at least 1) by averaging its 2x2 (or, for odd sizes, up to
+    /// 3x3) blocks, down to 1x1.
+    levels: Vec<MipLevel>,
+}
+
+/// One reduced-resolution copy of an [`ImageTexture`] (colour only).
+#[derive(Debug)]
+struct MipLevel {
+    width: u32,
+    height: u32,
+    texels: Vec<Vec3>,
+}
+
+impl MipLevel {
+    /// The next smaller level of the `width` x `height` `texels`: texel
+    /// `(i, j)` averages source columns `[2i, 2i+1]` and rows
+    /// `[2j, 2j+1]`, with the last column (row) of an odd size folded into
+    /// the last texel, so every source texel counts and the mean of the
+    /// image is kept up to rounding.
+    fn halve(width: u32, height: u32, texels: &[Vec3]) -> MipLevel {
+        let (w, h) = ((width / 2).max(1), (height / 2).max(1));
+        let span = |i: u32, n: u32, m: u32| {
+            let start = (2 * i).min(n - 1);
+            let end = if i + 1 == m { n } else { (2 * i + 2).min(n) };
+            start..end
+        };
+        let mut out = Vec::with_capacity((w * h) as usize);
+        for j in 0..h {
+            let rows = span(j, height, h);
+            for i in 0..w {
+                let cols = span(i, width, w);
+                let mut sum = Vec3::ZERO;
+                let mut n = 0.0;
+                for y in rows.clone() {
+                    for x in cols.clone() {
+                        sum += texels[(y * width + x) as usize];
+                        n += 1.0;
+                    }
+                }
+                out.push(sum / n);
+            }
+        }
+        MipLevel {
+            width: w,
+            height: h,
+            texels: out,
+        }
+    }
+}
+
+/// The texel indices and fractions of a lookup at `uv` in a `width` x
+/// `height` image with `sampler` (see [`ImageTexture::taps`]).
+#[inline]
+fn taps_in(
+    width: u32,
+    height: u32,
+    uv: Vec2,
+    sampler: TextureSampler,
+) -> Option<([usize; 4], f32, f32)> {
+    if width == 0 || height == 0 {
+        return None;
+    }
+    let (w, h) = (width as i64, height as i64);
+    let at = |xi: i64, yi: i64| {
+        sampler.wrap_v.index(yi, h) * width as usize + sampler.wrap_u.index(xi, w)
+    };
+    if !sampler.linear {
+        let x = uv.x * width as f32;
+        let y = uv.y * height as f32;
+        if !x.is_finite() || !y.is_finite() {
+            return None;
+        }
+        let i = at(x.floor() as i64, y.floor() as i64);
+        return Some(([i; 4], 0.0, 0.0));
+    }
+    let x = uv.x * width as f32 - 0.5;
+    let y = uv.y * height as f32 - 0.5;
+    if !x.is_finite() || !y.is_finite() {
+        return None;
+    }
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    Some((
+        [
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        ],
+        fx,
+        fy,
+    ))
+}
+
+/// Bilinear (or nearest) lookup in `texels` of a `width` x `height` image.
+#[inline]
+fn bilinear(width: u32, height: u32, texels: &[Vec3], uv: Vec2, sampler: TextureSampler) -> Vec3 {
+    let Some(([a, b, c, d], fx, fy)) = taps_in(width, height, uv, sampler) else {
+        return texels.first().copied().unwrap_or(Vec3::ONE);
+    };
+    let top = texels[a].lerp(texels[b], fx);
+    let bottom = texels[c].lerp(texels[d], fx);
+    top.lerp(bottom, fy)
 }
 
 /// How texture coordinates outside `[0, 1]` are mapped (glTF sampler
@@ -80,14 +186,59 @@ impl Default for TextureSampler {
 }
 
 impl ImageTexture {
-    /// An opaque texture of `width` x `height` row-major texels.
+    /// An opaque texture of `width` x `height` row-major texels, with its
+    /// mipmaps.
     pub fn new(width: u32, height: u32, texels: Vec<Vec3>) -> Self {
+        Self::with_alpha(width, height, texels, Vec::new())
+    }
+
+    /// A texture with an alpha channel (`alpha` empty: opaque), with its
+    /// mipmaps (of the colour; alpha is read at full resolution).
+    pub fn with_alpha(width: u32, height: u32, texels: Vec<Vec3>, alpha: Vec<f32>) -> Self {
+        let mut levels: Vec<MipLevel> = Vec::new();
+        if texels.len() == (width as usize) * (height as usize) {
+            let (mut w, mut h) = (width, height);
+            while w > 1 || h > 1 {
+                let next = match levels.last() {
+                    Some(l) => MipLevel::halve(w, h, &l.texels),
+                    None => MipLevel::halve(w, h, &texels),
+                };
+                (w, h) = (next.width, next.height);
+                levels.push(next);
+            }
+        }
         Self {
             width,
             height,
             texels,
-            alpha: Vec::new(),
+            alpha,
+            levels,
         }
+    }
+
+    /// Number of mipmap levels, the full-resolution image included.
+    pub fn level_count(&self) -> usize {
+        self.levels.len() + 1
+    }
+
+    /// The size of mipmap level `level` (0: full resolution), clamped to
+    /// the last level.
+    pub fn level_size(&self, level: usize) -> (u32, u32) {
+        match level.min(self.levels.len()) {
+            0 => (self.width, self.height),
+            k => (self.levels[k - 1].width, self.levels[k - 1].height),
+        }
+    }
+
+    /// The (fractional) mipmap level for a footprint `width_uv` wide in
+    /// texture coordinates: `log2` of the footprint in texels of the
+    /// full-resolution image, `log2(width_uv * sqrt(width * height))`
+    /// (the ray-cone rule for an isotropic footprint). At most 0 (or not
+    /// finite) reads the full-resolution image.
+    #[inline]
+    pub fn level_of(&self, width_uv: f32) -> f32 {
+        let texels = width_uv * ((self.width as f32) * (self.height as f32)).sqrt();
+        texels.log2()
     }
 
     /// Bilinear lookup with repeat wrapping; `uv` (0,0) is the top-left corner.
@@ -102,52 +253,44 @@ impl ImageTexture {
     /// empty or the texel coordinates are not finite.
     #[inline]
     fn taps(&self, uv: Vec2, sampler: TextureSampler) -> Option<([usize; 4], f32, f32)> {
-        if self.width == 0 || self.height == 0 {
-            return None;
-        }
-        let (w, h) = (self.width as i64, self.height as i64);
-        let at = |xi: i64, yi: i64| {
-            sampler.wrap_v.index(yi, h) * self.width as usize + sampler.wrap_u.index(xi, w)
-        };
-        if !sampler.linear {
-            let x = uv.x * self.width as f32;
-            let y = uv.y * self.height as f32;
-            if !x.is_finite() || !y.is_finite() {
-                return None;
-            }
-            let i = at(x.floor() as i64, y.floor() as i64);
-            return Some(([i; 4], 0.0, 0.0));
-        }
-        let x = uv.x * self.width as f32 - 0.5;
-        let y = uv.y * self.height as f32 - 0.5;
-        if !x.is_finite() || !y.is_finite() {
-            return None;
-        }
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        Some((
-            [
-                at(x0, y0),
-                at(x0 + 1, y0),
-                at(x0, y0 + 1),
-                at(x0 + 1, y0 + 1),
-            ],
-            fx,
-            fy,
-        ))
+        taps_in(self.width, self.height, uv, sampler)
     }
 
     /// Lookup with `sampler`'s wrapping and filter; `uv` (0,0) is the
     /// top-left corner. Non-finite coordinates read the first texel.
     pub fn sample_with(&self, uv: Vec2, sampler: TextureSampler) -> Vec3 {
-        let Some(([a, b, c, d], fx, fy)) = self.taps(uv, sampler) else {
-            return self.texels.first().copied().unwrap_or(Vec3::ONE);
+        bilinear(self.width, self.height, &self.texels, uv, sampler)
+    }
+
+    /// Lookup at mipmap level `level` (fractional: the two levels around
+    /// it are blended, trilinear filtering). A level of at most 0, or a
+    /// nearest-filtered sampler, reads the full-resolution image exactly
+    /// as [`ImageTexture::sample_with`]; levels beyond the last read the
+    /// last (1x1) level.
+    pub fn sample_level(&self, uv: Vec2, sampler: TextureSampler, level: f32) -> Vec3 {
+        // `!(level > 0)` also catches NaN.
+        if !(level > 0.0) || !sampler.linear || self.levels.is_empty() {
+            return self.sample_with(uv, sampler);
+        }
+        let last = self.levels.len();
+        let read = |k: usize| match k {
+            0 => self.sample_with(uv, sampler),
+            k => {
+                let l = &self.levels[k - 1];
+                bilinear(l.width, l.height, &l.texels, uv, sampler)
+            }
         };
-        let t = &self.texels;
-        let top = t[a].lerp(t[b], fx);
-        let bottom = t[c].lerp(t[d], fx);
-        top.lerp(bottom, fy)
+        if level >= last as f32 {
+            return read(last);
+        }
+        let k = level.floor();
+        let f = level - k;
+        let k = k as usize;
+        let lo = read(k);
+        if f == 0.0 {
+            return lo;
+        }
+        lo.lerp(read(k + 1), f)
     }
 
     /// Alpha at `uv` with `sampler` (1 for an image without alpha).
@@ -239,6 +382,47 @@ impl Texture {
 }
 
 impl Texture {
+    /// Colour at texture coordinate `uv` for a footprint `width_uv` wide in
+    /// texture coordinates (texture level of detail; 0 reads exactly what
+    /// [`Texture::sample`] reads). An image reads its mipmaps at the level
+    /// where the footprint (scaled by the texture transform) covers one
+    /// texel ([`ImageTexture::level_of`], [`ImageTexture::sample_level`]).
+    /// A checkerboard whose squares are at least four times wider than the
+    /// footprint is read exactly; otherwise it is box-filtered over the
+    /// footprint analytically (the mean of the pattern over a square of
+    /// that width), so that distant squares blend to their mean instead of
+    /// aliasing.
+    pub fn sample_lod(&self, uv: Vec2, width_uv: f32) -> Color {
+        if !(width_uv > 0.0) {
+            return self.sample(uv);
+        }
+        match self {
+            Texture::Image {
+                image,
+                transform,
+                sampler,
+            } => {
+                let stretch = (transform.scale.x * transform.scale.y).abs().sqrt();
+                let level = image.level_of(width_uv * stretch);
+                image.sample_level(transform.apply(uv), *sampler, level)
+            }
+            Texture::Checker { scale, even, odd } => {
+                let w = width_uv * *scale;
+                if w < 0.25 || !w.is_finite() {
+                    return self.sample(uv);
+                }
+                let p = uv * *scale;
+                // The mean over [p - w/2, p + w/2] of the square wave that
+                // is +1 on even unit intervals and -1 on odd ones: its
+                // antiderivative is -2 |fract(x/2) - 1/2|.
+                let tri = |x: f32| 2.0 * ((x * 0.5 - (x * 0.5).floor()) - 0.5).abs();
+                let mean = |x: f32| (tri(x - 0.5 * w) - tri(x + 0.5 * w)) / w;
+                let even_fraction = 0.5 * (1.0 + mean(p.x) * mean(p.y));
+                *odd + (*even - *odd) * even_fraction
+            }
+        }
+    }
+
     /// Alpha (coverage) at `uv`: the image's alpha channel, 1 for images
     /// without one and for procedural textures.
     pub fn alpha(&self, uv: Vec2) -> f32 {
@@ -598,20 +782,41 @@ impl Material {
         }
     }
 
-    /// Evaluates the material at texture coordinate `uv`.
+    /// True when a lookup of the material depends on its texture level of
+    /// detail: it has a colour, emission or metallic-roughness texture.
+    #[inline]
+    pub fn has_textures(&self) -> bool {
+        self.base_color_texture.is_some()
+            || self.emission_texture.is_some()
+            || self
+                .metallic_roughness
+                .as_ref()
+                .is_some_and(|mr| mr.texture.is_some())
+    }
+
+    /// Evaluates the material at texture coordinate `uv` (full-resolution
+    /// textures).
     pub fn sample(&self, uv: Vec2) -> SurfaceSample {
+        self.sample_lod(uv, 0.0)
+    }
+
+    /// Evaluates the material at texture coordinate `uv` with a footprint
+    /// `width_uv` wide in texture coordinates: colour, emission and
+    /// metallic-roughness textures are read at that level of detail
+    /// ([`Texture::sample_lod`]); 0 is [`Material::sample`].
+    pub fn sample_lod(&self, uv: Vec2, width_uv: f32) -> SurfaceSample {
         let mut base = self.base_color;
         if let Some(t) = &self.base_color_texture {
-            base *= t.sample(uv);
+            base *= t.sample_lod(uv, width_uv);
         }
         let mut emission = self.emission;
         if let Some(t) = &self.emission_texture {
-            emission *= t.sample(uv);
+            emission *= t.sample_lod(uv, width_uv);
         }
         if let Some(mr) = &self.metallic_roughness {
             let (mut metallic, mut roughness) = (mr.metallic, mr.roughness);
             if let Some(t) = &mr.texture {
-                let texel = t.sample(uv);
+                let texel = t.sample_lod(uv, width_uv);
                 roughness *= texel.y;
                 metallic *= texel.z;
             }
@@ -693,6 +898,95 @@ mod tests {
             alpha: vec![0.0, 0.5, 1.0],
             ..ImageTexture::new(3, 1, (0..3).map(|i| Vec3::splat(i as f32)).collect())
         }
+    }
+
+    /// Mipmaps, worked by hand on a 4x2 image of texels 0..8 (rows 0..4
+    /// and 4..8): level 1 averages 2x2 blocks (2.5 and 4.5), level 2 is the
+    /// mean (3.5) and is read beyond the last level; a fractional level
+    /// blends the two around it; a level of at most 0 (or NaN), or a
+    /// nearest-filtered sampler, is the plain lookup bit for bit; an odd
+    /// size folds its last texel into the last block; `level_of` is `log2`
+    /// of the footprint in texels.
+    #[test]
+    fn mipmaps_average_blocks_and_blend_levels() {
+        let t = ImageTexture::new(4, 2, (0..8).map(|i| Vec3::splat(i as f32)).collect());
+        assert_eq!(t.level_count(), 3);
+        assert_eq!(t.level_size(1), (2, 1));
+        assert_eq!(t.level_size(2), (1, 1));
+        assert_eq!(t.level_size(9), (1, 1));
+        let s = TextureSampler {
+            wrap_u: Wrap::ClampToEdge,
+            wrap_v: Wrap::ClampToEdge,
+            linear: true,
+        };
+        let (left, right) = (Vec2::new(0.25, 0.5), Vec2::new(0.75, 0.5));
+        assert_eq!(t.sample_level(left, s, 1.0), Vec3::splat(2.5));
+        assert_eq!(t.sample_level(right, s, 1.0), Vec3::splat(4.5));
+        assert_eq!(
+            t.sample_level(Vec2::new(0.3, 0.1), s, 2.0),
+            Vec3::splat(3.5)
+        );
+        assert_eq!(
+            t.sample_level(Vec2::new(0.3, 0.1), s, 7.5),
+            Vec3::splat(3.5)
+        );
+        assert!(
+            (t.sample_level(left, s, 1.5) - Vec3::splat(3.0))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert!(
+            (t.sample_level(left, s, 0.25).x - (0.75 * t.sample_with(left, s).x + 0.25 * 2.5))
+                .abs()
+                < 1e-6
+        );
+        let nearest = TextureSampler { linear: false, ..s };
+        for (uv, level) in [(left, 0.0), (right, -3.0), (Vec2::new(0.6, 0.2), f32::NAN)] {
+            assert_eq!(t.sample_level(uv, s, level), t.sample_with(uv, s));
+            assert_eq!(t.sample_level(uv, nearest, 2.0), t.sample_with(uv, nearest));
+        }
+        let odd = ImageTexture::new(3, 1, (0..3).map(|i| Vec3::splat(i as f32)).collect());
+        assert_eq!(odd.level_count(), 2);
+        assert_eq!(odd.sample_level(Vec2::splat(0.5), s, 1.0), Vec3::splat(1.0));
+        assert!((t.level_of(1.0 / 8f32.sqrt())).abs() < 1e-6);
+        assert!((t.level_of(4.0 / 8f32.sqrt()) - 2.0).abs() < 1e-6);
+    }
+
+    /// The filtered checkerboard is the mean of the pattern over the
+    /// footprint's square, checked against a 400x400 grid average
+    /// (tolerance: the grid misplaces at most 4 of its 400 lines per
+    /// square edge it crosses); a footprint under a quarter square reads
+    /// the pattern exactly.
+    #[test]
+    fn filtered_checker_is_the_box_mean_of_the_pattern() {
+        let c = Texture::Checker {
+            scale: 2.0,
+            even: Color::new(1.0, 0.5, 0.0),
+            odd: Color::new(0.0, 0.25, 1.0),
+        };
+        for (uv, w) in [
+            (Vec2::new(0.13, 0.71), 0.3),
+            (Vec2::new(-1.4, 2.05), 0.9),
+            (Vec2::new(3.3, -0.2), 2.6),
+        ] {
+            let n = 400;
+            let mut sum = Color::ZERO;
+            for j in 0..n {
+                for i in 0..n {
+                    let d = (Vec2::new(i as f32, j as f32) + 0.5) / n as f32 - 0.5;
+                    sum += c.sample(uv + d * w);
+                }
+            }
+            let brute = sum / (n * n) as f32;
+            let got = c.sample_lod(uv, w);
+            assert!(
+                (got - brute).abs().max_element() < 0.02,
+                "uv {uv}, width {w}: filtered {got}, grid mean {brute}"
+            );
+        }
+        let uv = Vec2::new(0.37, 0.12);
+        assert_eq!(c.sample_lod(uv, 0.1), c.sample(uv));
     }
 
     /// Texel indices of each wrap mode, worked by hand for a 3-texel axis.

@@ -521,12 +521,23 @@ impl RenderScene {
         // The point comes from the object-space surface point, correct to a
         // few ulps of its own coordinates; `ray.at(t)` would carry the
         // rounding of a possibly distant ray origin.
+        // Texture coordinates per length only matter to textured materials.
+        let lod = self.materials[inst.material as usize].has_textures();
+        let mut tangents = None;
         let (point, gn, sn, uv) = match (local, &inst.geometry) {
+            (LocalHit::Shape { point, normal, uv }, InstanceGeometry::Shape(shape)) if lod => {
+                tangents = shape.uv_tangents(point, normal);
+                let n = xf.normal(normal);
+                (xf.to_world.transform_point3a(point), n, n, uv)
+            }
             (LocalHit::Shape { point, normal, uv }, _) => {
                 let n = xf.normal(normal);
                 (xf.to_world.transform_point3a(point), n, n, uv)
             }
             (LocalHit::Mesh(h), InstanceGeometry::Mesh(m)) => {
+                if lod {
+                    tangents = m.uv_tangents(h.triangle);
+                }
                 let s = m.surface(&h);
                 let gn = xf.normal(s.geometric_normal);
                 let mut sn = xf.normal(s.shading_normal);
@@ -551,9 +562,26 @@ impl RenderScene {
             geometric_normal: gn,
             shading_normal: sn,
             uv,
+            uv_density: tangents.map_or(0.0, |(du, dv)| uv_density(xf, du, dv)),
             instance: index,
             material: inst.material,
         }
+    }
+}
+
+/// Texture coordinates per unit of world length for the object-space
+/// derivatives `du`, `dv` of the surface point with respect to the texture
+/// coordinates: `1 / sqrt(|M du x M dv|)` with `M` the instance's linear
+/// part (0 when that area is zero or not finite).
+#[inline]
+fn uv_density(xf: &crate::geometry::transform::InstanceTransform, du: Vec3A, dv: Vec3A) -> f32 {
+    let area = (xf.to_world.matrix3 * du)
+        .cross(xf.to_world.matrix3 * dv)
+        .length();
+    if area > 0.0 && area.is_finite() {
+        area.sqrt().recip()
+    } else {
+        0.0
     }
 }
 

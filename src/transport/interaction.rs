@@ -10,7 +10,7 @@ use std::f32::consts::PI;
 
 use glam::Vec3A;
 
-use crate::core::math::{Color, Ray};
+use crate::core::math::{Color, Ray, RayCone};
 use crate::scene::material::SurfaceSample;
 use crate::scene::{Hit, RenderScene};
 
@@ -31,12 +31,27 @@ pub struct Interaction {
     pub front_face: bool,
     /// The material evaluated at the hit.
     pub surface: SurfaceSample,
+    /// The ray cone at the hit: what a perfectly specular reflection or
+    /// refraction carries on ([`RayCone::NONE`] after other bounces).
+    pub cone: RayCone,
 }
 
 impl Interaction {
-    /// Orients the hit towards the incoming ray and evaluates its material.
+    /// Orients the hit towards the incoming ray and evaluates its material
+    /// at full texture resolution (no ray cone).
     #[inline]
     pub fn new(scene: &RenderScene, ray: &Ray, hit: &Hit) -> Self {
+        Self::with_cone(scene, ray, hit, RayCone::NONE)
+    }
+
+    /// Orients the hit towards the incoming ray and evaluates its material
+    /// with the texture level of detail of the ray's `cone` (at the ray's
+    /// origin): the cone's width at the hit, divided by the cosine between
+    /// the ray and the geometric normal (the footprint stretches at grazing
+    /// angles; the cosine is floored at 1/64) and multiplied by the hit's
+    /// [`Hit::uv_density`], is the footprint in texture coordinates.
+    #[inline]
+    pub fn with_cone(scene: &RenderScene, ray: &Ray, hit: &Hit, cone: RayCone) -> Self {
         let wo = (-ray.direction).normalize();
         let front_face = hit.geometric_normal.dot(wo) >= 0.0;
         let (ng, ns) = if front_face {
@@ -44,13 +59,17 @@ impl Interaction {
         } else {
             (-hit.geometric_normal, -hit.shading_normal)
         };
+        let cone = cone.at(hit.t * ray.direction.length());
+        let cos = ng.dot(wo).abs().max(1.0 / 64.0);
+        let width_uv = cone.width * hit.uv_density / cos;
         Self {
             point: hit.point,
             ng,
             ns,
             wo,
             front_face,
-            surface: scene.materials()[hit.material as usize].sample(hit.uv),
+            surface: scene.materials()[hit.material as usize].sample_lod(hit.uv, width_uv),
+            cone,
         }
     }
 

@@ -558,6 +558,19 @@ pub struct Continuation {
     pub scale: f32,
 }
 
+impl Continuation {
+    /// The ray cone the continuation ray carries: the cone at the vertex
+    /// `it` for a perfectly specular lobe (density 0), none otherwise.
+    #[inline]
+    pub fn cone(&self, it: &Interaction) -> crate::core::math::RayCone {
+        if self.sample.pdf == 0.0 {
+            it.cone
+        } else {
+            crate::core::math::RayCone::NONE
+        }
+    }
+}
+
 /// Chooses how the path continues from a vertex at `depth` whose ray came
 /// with `throughput`: lobe, direction, roulette, depth and contribution
 /// limits. Reads the sampler's lobe, direction and roulette dimensions.

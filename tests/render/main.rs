@@ -34,7 +34,10 @@
 //! * `cargo test --test render overlay::` — the structure overlays
 //!   (wireframe, BVH boxes, grid cells, kd-tree planes): projection,
 //!   clipping and visibility against independent f64 and brute-force
-//!   answers, and the kd-tree's planes counted.
+//!   answers, and the kd-tree's planes counted;
+//! * `cargo test --test render texture_lod::` — texture level of detail:
+//!   grazing checkerboards without moire at 1 spp, the mipmap level a hit
+//!   reads.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -55,4 +58,5 @@ mod radiosity;
 mod robustness;
 mod scene_updates;
 mod shards;
+mod texture_lod;
 mod wavefront;

@@ -206,6 +206,7 @@ fn total_internal_reflection_starts_at_the_critical_angle() {
                 wo: -d,
                 front_face: false,
                 surface: glass(ior),
+                cone: Default::default(),
             };
             let [reflection, refraction] = scatter(&it);
             let r = reflection.expect("a reflection");

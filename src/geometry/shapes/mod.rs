@@ -125,6 +125,37 @@ fn positive(name: &str, v: f32) -> Result<(), String> {
 }
 
 impl Shape {
+    /// The object-space derivatives `(dP/du, dP/dv)` of the surface point
+    /// with respect to its texture coordinates at the hit `point` (with
+    /// `normal` the hit's normal), for texture level of detail; `None`
+    /// for shapes whose texture scale is not derived (lookups on them
+    /// read the full-resolution texture).
+    pub fn uv_tangents(&self, point: Vec3A, normal: Vec3A) -> Option<(Vec3A, Vec3A)> {
+        match self {
+            Shape::Plane => Some((Vec3A::X, Vec3A::Z)),
+            Shape::Disk { radius } => Some((Vec3A::X * (2.0 * radius), Vec3A::Z * (2.0 * radius))),
+            Shape::Polygon { .. } => {
+                // The axes `intersect_polygon` projects onto.
+                let n = normal.normalize();
+                let reference = if n.x.abs() < 0.9 { Vec3A::X } else { Vec3A::Z };
+                let u = (reference - n * n.dot(reference)).normalize();
+                Some((u, u.cross(n)))
+            }
+            Shape::Sphere { .. } => {
+                // u = phi / 2pi, v = theta / pi with theta from +Y.
+                let rho = (point.x * point.x + point.z * point.z).sqrt();
+                if rho <= 0.0 {
+                    return None;
+                }
+                let du = Vec3A::new(-point.z, 0.0, point.x) * std::f32::consts::TAU;
+                let dv = Vec3A::new(point.y * point.x / rho, -rho, point.y * point.z / rho)
+                    * std::f32::consts::PI;
+                Some((du, dv))
+            }
+            _ => None,
+        }
+    }
+
     /// Short lower-case name of the shape kind.
     pub fn kind_name(&self) -> &'static str {
         match self {

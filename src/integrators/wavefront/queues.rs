@@ -7,7 +7,7 @@
 
 use glam::{Vec2, Vec3A};
 
-use crate::core::math::{Color, Ray};
+use crate::core::math::{Color, Ray, RayCone};
 use crate::scene::Hit;
 
 /// Memory held by a queue's buffers, in bytes (capacity, not length).
@@ -69,6 +69,8 @@ pub struct RayItem {
     /// Path tracing: density with which the direction was drawn (zero for
     /// camera rays and specular lobes, and unused by Whitted transport).
     pub pdf: f32,
+    /// The ray's cone at its origin (texture level of detail).
+    pub cone: RayCone,
 }
 
 /// Rays to trace, by field.
@@ -86,6 +88,8 @@ pub struct RayQueue {
     pub depth: Vec<u32>,
     /// Direction densities (path tracing).
     pub pdf: Vec<f32>,
+    /// Ray cones at the origins.
+    pub cone: Vec<RayCone>,
 }
 
 impl RayQueue {
@@ -106,6 +110,7 @@ impl RayQueue {
         self.path.push(item.path);
         self.depth.push(item.depth);
         self.pdf.push(item.pdf);
+        self.cone.push(item.cone);
     }
 
     /// The ray at `i`.
@@ -123,6 +128,7 @@ impl RayQueue {
             path: self.path[i],
             depth: self.depth[i],
             pdf: self.pdf[i],
+            cone: self.cone[i],
         }
     }
 }
@@ -131,7 +137,7 @@ soa_queue!(
     RayQueue,
     "rays",
     path,
-    [origin, direction, throughput, path, depth, pdf]
+    [origin, direction, throughput, path, depth, pdf, cone]
 );
 
 /// A surface hit waiting to be shaded.
@@ -161,6 +167,10 @@ pub struct HitItem {
     pub distance: f32,
     /// Density of the ray's direction (path tracing; see [`RayItem::pdf`]).
     pub pdf: f32,
+    /// Texture coordinates per world length ([`Hit::uv_density`]).
+    pub uv_density: f32,
+    /// The cone of the ray that hit, at its origin.
+    pub cone: RayCone,
 }
 
 impl HitItem {
@@ -180,6 +190,8 @@ impl HitItem {
             instance: hit.instance,
             distance: hit.t * ray.ray.direction.length(),
             pdf: ray.pdf,
+            uv_density: hit.uv_density,
+            cone: ray.cone,
         }
     }
 
@@ -193,6 +205,7 @@ impl HitItem {
             geometric_normal: self.geometric_normal,
             shading_normal: self.shading_normal,
             uv: self.uv,
+            uv_density: self.uv_density,
             instance: self.instance,
             material: self.material,
         }
@@ -226,6 +239,10 @@ pub struct HitQueue {
     pub pdf: Vec<f32>,
     /// Bounce depths.
     pub depth: Vec<u32>,
+    /// Texture coordinates per world length.
+    pub uv_density: Vec<f32>,
+    /// Ray cones (at the rays' origins).
+    pub cone: Vec<RayCone>,
 }
 
 impl HitQueue {
@@ -248,6 +265,8 @@ impl HitQueue {
         self.instance.push(item.instance);
         self.distance.push(item.distance);
         self.pdf.push(item.pdf);
+        self.uv_density.push(item.uv_density);
+        self.cone.push(item.cone);
     }
 
     /// The hit at `i`.
@@ -266,6 +285,8 @@ impl HitQueue {
             instance: self.instance[i],
             distance: self.distance[i],
             pdf: self.pdf[i],
+            uv_density: self.uv_density[i],
+            cone: self.cone[i],
         }
     }
 }
@@ -286,7 +307,9 @@ soa_queue!(
         instance,
         distance,
         pdf,
-        depth
+        depth,
+        uv_density,
+        cone
     ]
 );
 
@@ -472,6 +495,7 @@ mod tests {
             path: 7,
             depth: 2,
             pdf: 0.25,
+            cone: RayCone::NONE,
         };
         q.push(item);
         q.push(RayItem { path: 8, ..item });
@@ -496,6 +520,7 @@ mod tests {
             path: 0,
             depth: 0,
             pdf: 0.0,
+            cone: RayCone::NONE,
         });
     }
 

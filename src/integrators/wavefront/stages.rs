@@ -59,6 +59,7 @@ pub fn generate_camera_rays(
             path: local as u32,
             depth: 0,
             pdf: 0.0,
+            cone: camera.cone(),
         });
     }
     rays.camera += count as u64;
@@ -174,7 +175,8 @@ fn shade_hits(
         out.clear();
         for i in range {
             let mut h = hits.get(i);
-            let it = Interaction::new(scene, &Ray::new(h.point, h.direction), &h.hit());
+            let it =
+                Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             // A segment that ran through an absorbing interior carries its
             // transmittance to everything seen at its end.
             if let Some(tr) = interior_transmittance(&it, h.distance) {
@@ -231,6 +233,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                     path: h.path,
                     depth: h.depth + 1,
                     pdf: 0.0,
+                    cone: it.cone,
                 };
                 out.push_secondary(s.kind, item);
             }
@@ -288,6 +291,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 path: h.path,
                 depth: h.depth + 1,
                 pdf: cont.sample.pdf,
+                cone: cont.cone(it),
             };
             out.push_secondary(cont.sample.kind, item);
         }

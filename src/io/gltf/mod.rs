@@ -78,8 +78,10 @@
 //! `KHR_texture_transform` on normal textures; `doubleSided` (nothing is
 //! culled, so winding and negative-determinant transforms do not matter);
 //! `KHR_materials_volume`'s thickness texture and, for volumes, its
-//! thickness (the traced distance inside is used; see below); minification
-//! filters (no mipmaps: the magnification filter is used);
+//! thickness (the traced distance inside is used; see below); the
+//! minification filter's choice (a linear magnification filter means
+//! trilinear mipmapping by ray cones whatever the minification filter
+//! says, a nearest one no mipmapping);
 //! texture coordinate sets other than 0 (set 0 is used, with a warning);
 //! light `range` (lights fall off with the inverse square law forever);
 //! animations, skins (skinned meshes render in their bind pose

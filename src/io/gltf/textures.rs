@@ -122,12 +122,7 @@ fn to_texture(img: &image::DynamicImage, srgb: bool) -> Result<ImageTexture, Str
     } else {
         Vec::new()
     };
-    Ok(ImageTexture {
-        width,
-        height,
-        texels,
-        alpha,
-    })
+    Ok(ImageTexture::with_alpha(width, height, texels, alpha))
 }
 
 /// The linear texture of image `index` (sRGB-decoded if `srgb`), cached.
@@ -196,8 +191,9 @@ pub(super) fn texture(
 
 /// The wrapping and filtering of a glTF sampler: each axis's wrap mode,
 /// and nearest or linear filtering as the magnification filter says
-/// (minification is handled by the same filter: textures are not
-/// mipmapped).
+/// (linear textures are minified through their mipmaps by the ray cones'
+/// level of detail, nearest ones are not; the minification filter is not
+/// read).
 pub(super) fn texture_sampler(s: &gltf::texture::Sampler) -> TextureSampler {
     use gltf::texture::{MagFilter, WrappingMode};
     let wrap = |w: WrappingMode| match w {
