@@ -34,8 +34,11 @@ fn render(path: &Path, kind: IntegratorKind, s: &RenderSettings, batch: usize) -
         .unwrap()
 }
 
-/// Every scene in assets/ (and the sample scenes when present).
+/// Every scene in assets/ (and the sample scenes when present). Scene
+/// files that include a model from `../shared/samples` are skipped when
+/// that folder is absent.
 fn every_scene() -> Vec<PathBuf> {
+    let samples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/samples");
     let mut v = Vec::new();
     let mut stack = vec![assets()];
     while let Some(dir) = stack.pop() {
@@ -47,12 +50,19 @@ fn every_scene() -> Vec<PathBuf> {
                 p.extension().and_then(|e| e.to_str()),
                 Some("toml" | "gltf" | "glb")
             ) {
-                v.push(p);
+                let needs_samples = p.extension().is_some_and(|e| e == "toml")
+                    && std::fs::read_to_string(&p)
+                        .unwrap()
+                        .contains("shared/samples");
+                if needs_samples && !samples.exists() {
+                    eprintln!("skipped {}: ../shared/samples not found", p.display());
+                } else {
+                    v.push(p);
+                }
             }
         }
     }
     v.sort();
-    let samples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/samples");
     for s in [
         "CornellBox/CornellBox.glb",
         "DamagedHelmet/glTF/DamagedHelmet.gltf",
