@@ -7,8 +7,7 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use prism::core::error::{Error, Result};
-use prism::image::output::write_atomic;
+use prism::core::error::Result;
 
 use super::SweepRow;
 
@@ -160,32 +159,11 @@ where
 
 /// Writes `dir/lightfield_sweep.png` and `.svg`.
 pub fn write_plots(dir: &Path, rows: &[SweepRow], title: &str, text: bool) -> Result<()> {
-    let png_path = dir.join("lightfield_sweep.png");
-    let svg_path = dir.join("lightfield_sweep.svg");
-    let fail = |path: &Path, m: String| Error::Output {
-        path: path.to_path_buf(),
-        message: m,
-    };
-    let mut rgb = vec![0u8; SIZE.0 as usize * SIZE.1 as usize * 3];
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
-        draw(&root, rows, title, text).map_err(|m| fail(&png_path, m))?;
-    }
-    let mut png = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut png),
-        &rgb,
-        SIZE.0,
-        SIZE.1,
-        image::ExtendedColorType::Rgb8,
+    crate::tradeoff::plot::write_png_and_svg(
+        &dir.join("lightfield_sweep.png"),
+        &dir.join("lightfield_sweep.svg"),
+        SIZE,
+        |root| draw(root, rows, title, text),
+        |root| draw(root, rows, title, text),
     )
-    .map_err(|e| fail(&png_path, e.to_string()))?;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        draw(&root, rows, title, text).map_err(|m| fail(&svg_path, m))?;
-    }
-    write_atomic(&png_path, &png)?;
-    write_atomic(&svg_path, svg.as_bytes())?;
-    Ok(())
 }

@@ -264,32 +264,50 @@ where
 /// Writes `dir/tradeoff.png` and `dir/tradeoff.svg`; returns how many
 /// rows could not be shown (relMSE of zero).
 pub fn write_plots(dir: &Path, rows: &[Row], title: &str, text: bool) -> Result<usize> {
-    let png_path = dir.join("tradeoff.png");
-    let svg_path = dir.join("tradeoff.svg");
+    write_png_and_svg(
+        &dir.join("tradeoff.png"),
+        &dir.join("tradeoff.svg"),
+        SIZE,
+        |root| draw(root, rows, title, text),
+        |root| draw(root, rows, title, text),
+    )?;
+    Ok(rows.iter().filter(|r| !plottable(r)).count())
+}
+
+/// Draws a plot twice, with `draw_png` into an RGB bitmap of `size` and
+/// with `draw_svg` into an SVG, and writes both files atomically (each
+/// error names the file it was for). Shared by the tradeoff and
+/// light-field plots.
+pub(crate) fn write_png_and_svg(
+    png_path: &Path,
+    svg_path: &Path,
+    size: (u32, u32),
+    draw_png: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> std::result::Result<(), String>,
+    draw_svg: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> std::result::Result<(), String>,
+) -> Result<()> {
     let fail = |path: &Path, m: String| Error::Output {
         path: path.to_path_buf(),
         message: m,
     };
-    let mut rgb = vec![0u8; SIZE.0 as usize * SIZE.1 as usize * 3];
+    let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
-        draw(&root, rows, title, text).map_err(|m| fail(&png_path, m))?;
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        draw_png(&root).map_err(|m| fail(png_path, m))?;
     }
     let mut png = Vec::new();
     image::ImageEncoder::write_image(
         image::codecs::png::PngEncoder::new(&mut png),
         &rgb,
-        SIZE.0,
-        SIZE.1,
+        size.0,
+        size.1,
         image::ExtendedColorType::Rgb8,
     )
-    .map_err(|e| fail(&png_path, e.to_string()))?;
+    .map_err(|e| fail(png_path, e.to_string()))?;
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        draw(&root, rows, title, text).map_err(|m| fail(&svg_path, m))?;
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        draw_svg(&root).map_err(|m| fail(svg_path, m))?;
     }
-    write_atomic(&png_path, &png)?;
-    write_atomic(&svg_path, svg.as_bytes())?;
-    Ok(rows.iter().filter(|r| !plottable(r)).count())
+    write_atomic(png_path, &png)?;
+    write_atomic(svg_path, svg.as_bytes())
 }
