@@ -37,7 +37,9 @@
 //!   answers, and the kd-tree's planes counted;
 //! * `cargo test --test render texture_lod::` — texture level of detail:
 //!   grazing checkerboards without moire at 1 spp, the mipmap level a hit
-//!   reads.
+//!   reads;
+//! * `cargo test --test render references::` — glTF sample models against
+//!   Mitsuba 3's renders of the same scenes (`tests/references/`).
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -55,6 +57,7 @@ mod panorama;
 mod path;
 mod photon;
 mod radiosity;
+mod references;
 mod robustness;
 mod scene_updates;
 mod shards;
