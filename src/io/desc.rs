@@ -220,8 +220,12 @@ impl SceneDesc {
     }
 
     /// Gives a scene that is not lit under `transport`
-    /// ([`SceneDesc::is_lit`]) the lights of [`default_lights`] for
-    /// `camera`. Returns a notice for standard error when it added them.
+    /// ([`SceneDesc::is_lit`]) the default lighting: under path transport
+    /// a uniform white environment of radiance 1 ([`default_environment`]:
+    /// light from every direction, as glTF viewers show a bare model),
+    /// under the other transports (which do not light surfaces with an
+    /// environment) the key light of [`default_lights`] for `camera`.
+    /// Returns a notice for standard error when it added either.
     pub fn ensure_light(
         &mut self,
         camera: &Camera,
@@ -229,6 +233,11 @@ impl SceneDesc {
     ) -> Option<String> {
         if self.is_lit(transport) {
             return None;
+        }
+        if transport == crate::core::settings::Transport::Path {
+            let (environment, what) = default_environment();
+            self.environment = Some(environment);
+            return Some(format!("the scene has no light; adding {what}"));
         }
         let (lights, what) = default_lights(camera);
         self.lights.extend(lights);
@@ -244,18 +253,30 @@ impl SceneDesc {
     }
 }
 
+/// The environment an unlit scene gets under path transport
+/// ([`SceneDesc::ensure_light`]): uniform white of radiance 1 (a white
+/// Lambertian surface under it, unshadowed, has radiance 1), and a few
+/// words saying what it is.
+pub fn default_environment() -> (crate::scene::environment::Environment, String) {
+    (
+        crate::scene::environment::Environment::uniform(Color::ONE),
+        "a uniform white environment of radiance 1".to_string(),
+    )
+}
+
 /// Illuminance of the default key light, lux: a white Lambertian surface
 /// facing it has radiance `E / pi`, about 1.
 pub const DEFAULT_KEY_LUX: f32 = std::f32::consts::PI;
 
-/// The lights an unlit scene gets ([`SceneDesc::ensure_light`]),
-/// and a few words saying what they are: one directional "key" light of
+/// The lights an unlit scene gets under Whitted, photon and radiosity
+/// transport ([`SceneDesc::ensure_light`]), and a few words saying what they are: one directional "key" light of
 /// [`DEFAULT_KEY_LUX`] lux, white, shining from behind the camera's left
 /// shoulder (from the eye's side, rotated 30 degrees up and 30 degrees to
 /// the left of the viewing direction) so that faces turned towards the
 /// camera are lit and shapes read by their shading.
 ///
-/// This is the one place that decides the default lighting.
+/// With [`default_environment`], the one place that decides the default
+/// lighting.
 pub fn default_lights(camera: &Camera) -> (Vec<LightDesc>, String) {
     use glam::{DMat3, DVec3};
     let forward = (camera.look_at - camera.look_from).normalize_or(DVec3::NEG_Z);

@@ -779,4 +779,13 @@ fn photon_options_reject_bad_input_cleanly() {
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
+    // Under path transport it gets a uniform white environment instead.
+    let o = render(&dark, &out, &["--transport", "path"]);
+    assert_success(&o);
+    assert!(
+        String::from_utf8_lossy(&o.stderr)
+            .contains("adding a uniform white environment of radiance 1"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

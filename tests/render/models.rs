@@ -531,12 +531,14 @@ fn normal_maps_shade_like_the_geometry_they_replace() {
     }
 }
 
-/// Which scenes count as lit decides whether the default key light is
+/// Which scenes count as lit decides whether the default lighting is
 /// added: punctual lights light every transport; emissive surfaces light
 /// path and photon transport (they are area lights and photon sources
 /// there); an environment lights path transport only (the only one that
 /// samples it). A model shown with `--env` under path transport must not
-/// get a key light on top of the environment.
+/// get a key light on top of the environment. An unlit scene gets a
+/// uniform white environment under path transport and the key light under
+/// the others.
 #[test]
 fn the_key_light_is_added_only_where_nothing_lights_the_scene() {
     use prism::core::settings::Transport::{Path, Photon, Whitted};
@@ -570,7 +572,25 @@ fn the_key_light_is_added_only_where_nothing_lights_the_scene() {
             let camera = d.cameras[0].clone();
             let added = d.ensure_light(&camera, t).is_some();
             assert_eq!(added, !want, "{name} under {t:?}");
-            assert_eq!(d.lights.len(), desc.lights.len() + added as usize);
+            // Path transport gets a uniform white environment, the others
+            // the key light.
+            let env_added = added && t == Path;
+            assert_eq!(
+                d.lights.len(),
+                desc.lights.len() + (added && !env_added) as usize,
+                "{name} under {t:?}"
+            );
+            if env_added {
+                assert!(desc.environment.is_none(), "{name}");
+                assert!(d.is_lit(Path), "{name}");
+                assert_eq!(
+                    d.environment.as_ref().map(|e| e.radiance(glam::Vec3A::Y)),
+                    Some(Color::ONE),
+                    "{name}"
+                );
+            } else {
+                assert_eq!(d.environment.is_some(), desc.environment.is_some());
+            }
         }
     }
 }
