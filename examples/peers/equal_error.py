@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Prism against Mitsuba 3 at equal error: path tracing a glTF scene at 320x240
+and 16 bounces, both measured against a high-spp reference.
+
+  ~/.cache/peers-venv/bin/python examples/peers/equal_error.py assets/gltf/cornell.gltf \
+      --reference REF.exr --prism target/release/prism --spp 16,64,256 --rounds 3
+
+For each spp, the two renderers are run alternately (`--rounds` times; the
+median time is kept): Prism with `prism render --transport path --max-depth 16`
+(each integrator given by `--integrators`), Mitsuba with
+../shared/peers/mitsuba_render.py (`llvm_ad_rgb`, `--max-depth 18`, which is
+16 bounces in Mitsuba's counting). Times are each renderer's own render time
+(Prism's "in X s" line, Mitsuba's mi.render plus readback after a compiling
+warm-up), not loading. The error is the mean relative error against the
+reference, mean over pixels and channels of |x - ref| / (ref + 0.01).
+
+Monte Carlo error falls as time^-1/2, so each point gives a constant
+c = error * sqrt(time) (printed for every point; the highest-spp point,
+least affected by fixed start-up costs, is used): the time Prism needs to
+reach Mitsuba's error is (c_prism / c_mitsuba)^2 times Mitsuba's. Prints a
+Markdown table.
+
+Make the reference with Mitsuba at 4096 spp and another seed:
+  ~/.cache/peers-venv/bin/python ../shared/peers/mitsuba_render.py SCENE.gltf -o REF.exr \
+      --width 320 --height 240 --spp 4096 --max-depth 18 --seed 1
+"""
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import OpenEXR
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PEER = os.path.normpath(os.path.join(HERE, "..", "..", "..", "shared", "peers", "mitsuba_render.py"))
+
+
+def load(path):
+    with OpenEXR.File(path) as f:
+        ch = f.channels()
+        if "RGB" in ch:
+            return np.array(ch["RGB"].pixels, dtype=np.float64)
+        return np.stack([ch[c].pixels for c in "RGB"], -1).astype(np.float64)
+
+
+def mre(img, ref):
+    return float(np.mean(np.abs(img - ref) / (ref + 0.01)))
+
+
+def run_prism(prism, scene, out, spp, integrator, threads):
+    cmd = [prism, "render", scene, "-o", out, "--transport", "path", "--max-depth", "16",
+           "--width", "320", "--height", "240", "--spp", str(spp), "--integrator", integrator,
+           "--threads", str(threads)]
+    p = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    m = re.search(r"at %d spp in ([0-9.]+) s" % spp, p.stdout + p.stderr)
+    if not m:
+        sys.exit("could not read Prism's time from: " + p.stdout + p.stderr)
+    return float(m.group(1))
+
+
+def run_mitsuba(python, scene, out, spp, threads, seed):
+    cmd = [python, PEER, scene, "-o", out, "--width", "320", "--height", "240", "--spp", str(spp),
+           "--max-depth", "18", "--threads", str(threads), "--seed", str(seed)]
+    p = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    m = re.search(r"%d spp in ([0-9.]+) s" % spp, p.stdout)
+    if not m:
+        sys.exit("could not read Mitsuba's time from: " + p.stdout + p.stderr)
+    return float(m.group(1))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("scene")
+    ap.add_argument("--reference", required=True)
+    ap.add_argument("--prism", default="target/release/prism")
+    ap.add_argument("--spp", default="16,64,256")
+    ap.add_argument("--integrators", default="recursive,wavefront")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=os.cpu_count())
+    a = ap.parse_args()
+    ref = load(a.reference)
+    tmp = tempfile.mkdtemp(prefix="equal_error_")
+    rows = {}
+    for spp in [int(s) for s in a.spp.split(",")]:
+        times = {}
+        errs = {}
+        for r in range(a.rounds):
+            for integ in a.integrators.split(","):
+                out = os.path.join(tmp, "prism_%s.exr" % integ)
+                times.setdefault("prism " + integ, []).append(run_prism(a.prism, a.scene, out, spp, integ, a.threads))
+                errs["prism " + integ] = mre(load(out), ref)
+            out = os.path.join(tmp, "mitsuba.exr")
+            times.setdefault("mitsuba", []).append(run_mitsuba(sys.executable, a.scene, out, spp, a.threads, 0))
+            errs["mitsuba"] = mre(load(out), ref)
+        for k in times:
+            t = statistics.median(times[k])
+            rows.setdefault(k, []).append((spp, t, errs[k]))
+            print("%-18s %5d spp  %8.3f s  error %.5f  c = %.5f" % (k, spp, t, errs[k], errs[k] * t ** 0.5),
+                  file=sys.stderr, flush=True)
+    print("| renderer | spp | seconds (median of %d) | mean relative error | error x sqrt(seconds) |" % a.rounds)
+    print("|---|---:|---:|---:|---:|")
+    for k, pts in rows.items():
+        for spp, t, e in pts:
+            print("| %s | %d | %.3f | %.5f | %.5f |" % (k, spp, t, e, e * t ** 0.5))
+    cm = rows["mitsuba"][-1][2] * rows["mitsuba"][-1][1] ** 0.5
+    for k, pts in rows.items():
+        if k == "mitsuba":
+            continue
+        c = pts[-1][2] * pts[-1][1] ** 0.5
+        print("\n%s needs %.2fx Mitsuba's time for Mitsuba's error (at the highest spp)." % (k, (c / cm) ** 2))
+
+
+if __name__ == "__main__":
+    main()
