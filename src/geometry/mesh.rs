@@ -14,7 +14,7 @@ use crate::accel::bvh8::{Bvh8, MAX_LEAF};
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
-use crate::accel::single::traverse;
+use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
 /// Re-exported: the structure a mesh is built with.
@@ -315,6 +315,15 @@ impl Mesh {
         })
     }
 
+    /// Starts loading the triangle block of leaf `leaf`.
+    #[inline(always)]
+    fn prefetch_leaf(&self, leaf: u32) {
+        crate::accel::single::prefetch_bytes(
+            &self.blocks[leaf as usize],
+            std::mem::size_of::<Tri4>(),
+        );
+    }
+
     /// The structure the mesh was built with.
     pub fn accel(&self) -> Accel {
         match self.structure {
@@ -426,14 +435,22 @@ impl Mesh {
         let mut best: Option<MeshHit> = None;
         match &self.structure {
             Structure::Bvh => {
-                traverse::<AVX>(&self.bvh, ray, t_min, t_max, false, |leaf, t_max| {
-                    let hit = self.leaf_hit(&wt, leaf, t_min, Self::reach(t_max, &best))?;
-                    if !self.wins(hit.t, hit.triangle, &best) {
-                        return None;
-                    }
-                    best = Some(hit);
-                    Some(hit.t)
-                });
+                traverse_with::<AVX>(
+                    &self.bvh,
+                    ray,
+                    t_min,
+                    t_max,
+                    false,
+                    |leaf, t_max| {
+                        let hit = self.leaf_hit(&wt, leaf, t_min, Self::reach(t_max, &best))?;
+                        if !self.wins(hit.t, hit.triangle, &best) {
+                            return None;
+                        }
+                        best = Some(hit);
+                        Some(hit.t)
+                    },
+                    |leaf| self.prefetch_leaf(leaf),
+                );
             }
             Structure::Grid(g) => {
                 g.traverse(ray, t_min, t_max, false, |i, t_max| {
@@ -658,9 +675,15 @@ impl Mesh {
             wt.intersect(p0, p1, p2, t_min, t_max).map(|h| h.0)
         };
         match &self.structure {
-            Structure::Bvh => traverse::<AVX>(&self.bvh, ray, t_min, t_max, true, |leaf, t_max| {
-                self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t)
-            }),
+            Structure::Bvh => traverse_with::<AVX>(
+                &self.bvh,
+                ray,
+                t_min,
+                t_max,
+                true,
+                |leaf, t_max| self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t),
+                |leaf| self.prefetch_leaf(leaf),
+            ),
             Structure::Grid(g) => g.traverse(ray, t_min, t_max, true, tri),
             Structure::KdTree(k) => k.traverse(ray, t_min, t_max, true, tri),
             Structure::Brute => (0..self.corners.len() as u32).any(|i| tri(i, t_max).is_some()),

@@ -206,7 +206,7 @@ impl WatertightRay {
 /// repeat lane 0 and are masked by [`Tri4::count`]. The block also
 /// names its triangles, so a leaf test reads nothing else.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(16))]
+#[repr(C, align(32))]
 pub struct Tri4 {
     /// Vertex coordinates.
     pub v: [[[f32; 4]; 3]; 3],
