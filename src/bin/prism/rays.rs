@@ -450,8 +450,9 @@ pub fn run(args: RaysArgs) -> Result<()> {
         for (t, ms) in &result.build_ms {
             if result.accel == "bvh" {
                 println!(
-                    "  build ({:?}, leaves of up to 4), {t} threads: {ms:.1} ms",
-                    args.bvh_quality
+                    "  build ({:?}, leaves of up to {}), {t} threads: {ms:.1} ms",
+                    args.bvh_quality,
+                    prism::geometry::mesh::LEAF_TRIANGLES
                 );
             } else {
                 println!("  build ({}), {t} threads: {ms:.1} ms", result.accel);
