@@ -306,7 +306,7 @@ fn cpu_seconds() -> Option<f64> {
     };
     // SAFETY: `ts` is a valid `timespec` for the call to write.
     let r = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
-    (r == 0).then(|| ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
+    (r == 0).then_some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
 }
 
 /// No process CPU clock here.
