@@ -91,7 +91,9 @@ pub struct Bvh8 {
     pub depth: usize,
 }
 
-/// Most primitives a leaf of [`Bvh8::build`] holds.
+/// A small leaf size for trees over arbitrary boxes (the collapse tests
+/// use it); mesh BVHs choose their own (`LEAF_TRIANGLES` in the mesh
+/// module).
 pub const MAX_LEAF: u32 = 4;
 
 impl Bvh8 {

@@ -202,7 +202,8 @@ impl WatertightRay {
 }
 
 /// Up to four triangles side by side, for one SIMD test
-/// ([`WatertightRay::intersect4`]): `v[vertex][axis][lane]`. Unused lanes
+/// ([`WatertightRay::intersect4`], or two blocks in
+/// [`WatertightRay::intersect8`]): `v[vertex][axis][lane]`. Unused lanes
 /// repeat lane 0 and are masked by [`Tri4::count`]. The block also
 /// names its triangles, so a leaf test reads nothing else.
 #[derive(Clone, Copy, Debug)]
