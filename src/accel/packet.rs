@@ -200,6 +200,7 @@ pub fn traverse<const AVX: bool>(
             n += 1;
         }
         for &e in &found[..n] {
+            prefetch_child(bvh, e.0);
             if top < FIXED {
                 fixed[top] = e;
                 top += 1;
@@ -207,6 +208,15 @@ pub fn traverse<const AVX: bool>(
                 spill.push(e);
             }
         }
+    }
+}
+
+/// Starts loading a pushed child: a node's rows (a leaf's primitives are
+/// the caller's, read per lane later).
+#[inline(always)]
+fn prefetch_child(bvh: &Bvh8, r: u32) {
+    if r & LEAF == 0 {
+        crate::accel::single::prefetch_bytes(&bvh.nodes[r as usize], std::mem::size_of::<Node8>());
     }
 }
 
@@ -282,14 +292,29 @@ fn test_child_avx2(
         enter = _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(near, on), inv), enter);
         exit = _mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(far, of), inv), exit);
     }
-    let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32 & go;
+    let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit);
+    let hit = _mm256_movemask_ps(inside) as u32 & go;
     if hit == 0 {
         return (0, f32::INFINITY);
     }
-    let e: [f32; LANES] = bytemuck::cast(enter);
-    let mut t = f32::INFINITY;
-    for_each_lane(hit, |l| t = min_keep(e[l], t));
-    (hit, t)
+    // The smallest entry of the lanes in `hit`, others as +inf: entries
+    // are never NaN (`maxps` keeps `t_min` over a NaN slab), so the order
+    // of the minima does not matter and this equals the lane loop of the
+    // portable path.
+    let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let keep = _mm256_cmpeq_epi32(
+        _mm256_and_si256(_mm256_set1_epi32(hit as i32), lane_bits),
+        lane_bits,
+    );
+    let e = _mm256_blendv_ps(
+        _mm256_set1_ps(f32::INFINITY),
+        enter,
+        _mm256_castsi256_ps(keep),
+    );
+    let m = _mm_min_ps(_mm256_castps256_ps128(e), _mm256_extractf128_ps::<1>(e));
+    let m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+    let m = _mm_min_ss(m, _mm_shuffle_ps::<0b01>(m, m));
+    (hit, _mm_cvtss_f32(m))
 }
 
 /// Lane `l` alone through the subtree at `start`; returns whether it was

@@ -94,10 +94,39 @@ pub fn traverse_from<const AVX: bool>(
     start: u32,
     ray: &NodeRay,
     t_min: f32,
+    t_max: f32,
+    any_hit: bool,
+    visit: impl FnMut(u32, f32) -> Option<f32>,
+) -> bool {
+    traverse_from_with::<AVX>(bvh, start, ray, t_min, t_max, any_hit, visit, |_| {})
+}
+
+/// [`traverse_from`] with `prefetch_leaf(leaf)`, called for a leaf that
+/// will be visited soon (it was entered beside a sibling), to start
+/// loading what its visit reads. Nodes entered beside a sibling are
+/// prefetched the same way.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn traverse_from_with<const AVX: bool>(
+    bvh: &Bvh8,
+    start: u32,
+    ray: &NodeRay,
+    t_min: f32,
     mut t_max: f32,
     any_hit: bool,
     mut visit: impl FnMut(u32, f32) -> Option<f32>,
+    prefetch_leaf: impl Fn(u32),
 ) -> bool {
+    let prefetch = |r: u32| {
+        if r & LEAF == 0 {
+            prefetch_bytes(
+                &bvh.nodes[r as usize],
+                std::mem::size_of::<crate::accel::bvh8::Node8>(),
+            );
+        } else {
+            prefetch_leaf(r & !LEAF);
+        }
+    };
     if bvh.nodes.is_empty() {
         return false;
     }
@@ -123,6 +152,10 @@ pub fn traverse_from<const AVX: bool>(
                         (enter[second], node.child[second]),
                     );
                     let (near, far) = if b.0 < a.0 { (b, a) } else { (a, b) };
+                    if PREFETCH {
+                        prefetch(far.1);
+                        prefetch(near.1);
+                    }
                     stack.push(entry(far.0, far.1));
                     cur = near.1;
                     continue;
@@ -136,6 +169,9 @@ pub fn traverse_from<const AVX: bool>(
                     let c = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let item = (enter[c], node.child[c]);
+                    if PREFETCH {
+                        prefetch(item.1);
+                    }
                     let mut j = n;
                     while j > 0 && buf[j - 1].0 < item.0 {
                         buf[j] = buf[j - 1];
@@ -171,6 +207,36 @@ pub fn traverse_from<const AVX: bool>(
     }
 }
 
+/// Whether traversal prefetches the children it enters beside a sibling
+/// (the farther ones wait on the stack, so their loads overlap the work on
+/// the nearer ones). Measured on the anchors' 100k mesh, one thread, rays
+/// per CPU second: bounce rays +15% (single) and +11% (packets of 8),
+/// camera rays unchanged.
+const PREFETCH: bool = true;
+
+/// Starts loading the `bytes` bytes at `p` into the cache (nothing on
+/// targets without a prefetch instruction).
+#[inline(always)]
+pub fn prefetch_bytes<T>(p: &T, bytes: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = (p as *const T).cast::<i8>();
+        let mut off = 0;
+        while off < bytes {
+            // SAFETY: a prefetch never faults nor changes memory; SSE is
+            // part of the x86-64 baseline.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(off));
+            }
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (p, bytes);
+}
+
 /// [`traverse_from`] from the root, preparing `ray` for `bvh`.
 #[inline(always)]
 pub fn traverse<const AVX: bool>(
@@ -183,6 +249,30 @@ pub fn traverse<const AVX: bool>(
 ) -> bool {
     let node_ray = NodeRay::new(ray, bvh);
     traverse_from::<AVX>(bvh, 0, &node_ray, t_min, t_max, any_hit, visit)
+}
+
+/// [`traverse`] with [`traverse_from_with`]'s leaf prefetch.
+#[inline(always)]
+pub fn traverse_with<const AVX: bool>(
+    bvh: &Bvh8,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    any_hit: bool,
+    visit: impl FnMut(u32, f32) -> Option<f32>,
+    prefetch_leaf: impl Fn(u32),
+) -> bool {
+    let node_ray = NodeRay::new(ray, bvh);
+    traverse_from_with::<AVX>(
+        bvh,
+        0,
+        &node_ray,
+        t_min,
+        t_max,
+        any_hit,
+        visit,
+        prefetch_leaf,
+    )
 }
 
 /// [`traverse`] with a visitor per primitive: `visit(slot, t_max)` tests

@@ -10,13 +10,21 @@ use rayon::prelude::*;
 use crate::accel::build::padded_aabb;
 /// Re-exported: a mesh is built with one of these presets.
 pub use crate::accel::build::{BuildOptions, BuildQuality, MAX_COORDINATE};
-use crate::accel::bvh8::{Bvh8, MAX_LEAF};
+use crate::accel::bvh8::Bvh8;
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
-use crate::accel::single::traverse;
+use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
+
+/// Most triangles in a mesh BVH leaf: two blocks of four, tested in one
+/// 8-wide pass on the AVX2 path ([`WatertightRay::intersect8`]). Leaves
+/// of eight rather than four halve the nodes (anchors 100k: 11,400 ->
+/// 5,800, which then fit a 2 MB L2) and take about one node visit off
+/// each ray, for the same number of leaf visits.
+pub const LEAF_TRIANGLES: u32 = 8;
+
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
 use crate::geometry::triangle::Tri4;
@@ -218,7 +226,7 @@ impl Mesh {
                     padded_aabb(a.min(b).min(c), a.max(b).max(c))
                 })
                 .collect();
-            let mut bvh = Bvh8::build(&boxes, quality.params(), MAX_LEAF);
+            let mut bvh = Bvh8::build(&boxes, quality.params(), LEAF_TRIANGLES);
             MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             // Each leaf's triangles in input order: of equal-t hits in one
             // leaf block the first lane, hence the lowest input index, wins.
@@ -241,14 +249,20 @@ impl Mesh {
             .par_iter()
             .map(|t| t.map(|i| positions[i as usize]))
             .collect();
+        // Two blocks per leaf, side by side: triangles 0-3, then 4-7 (an
+        // empty block, never read, for leaves of four or fewer).
         let blocks = bvh
             .leaves
             .par_iter()
-            .map(|l| {
-                Tri4::new(
-                    &corners[l.first as usize..(l.first + l.count) as usize],
-                    l.first,
-                )
+            .flat_map_iter(|l| {
+                let (first, count) = (l.first as usize, l.count as usize);
+                let lo = Tri4::new(&corners[first..first + count.min(4)], l.first);
+                let hi = if count > 4 {
+                    Tri4::new(&corners[first + 4..first + count], l.first + 4)
+                } else {
+                    Tri4 { count: 0, ..lo }
+                };
+                [lo, hi]
             })
             .collect();
         let structure = match accel {
@@ -304,15 +318,32 @@ impl Mesh {
 
     /// The nearest hit in leaf `leaf` inside `(t_min, t_max)`.
     #[inline(always)]
-    fn leaf_hit(&self, wt: &WatertightRay, leaf: u32, t_min: f32, t_max: f32) -> Option<MeshHit> {
-        let block = &self.blocks[leaf as usize];
-        let (lane, t, b1, b2) = wt.intersect4(block, block.count, t_min, t_max)?;
+    fn leaf_hit<const AVX: bool>(
+        &self,
+        wt: &WatertightRay,
+        leaf: u32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<MeshHit> {
+        let lo = &self.blocks[2 * leaf as usize];
+        let hi = &self.blocks[2 * leaf as usize + 1];
+        let (lane, t, b1, b2) =
+            wt.intersect8::<AVX>([lo, hi], lo.count + hi.count, t_min, t_max)?;
         Some(MeshHit {
             t,
-            triangle: block.first + lane,
+            triangle: lo.first + lane,
             b1,
             b2,
         })
+    }
+
+    /// Starts loading the triangle block of leaf `leaf`.
+    #[inline(always)]
+    fn prefetch_leaf(&self, leaf: u32) {
+        crate::accel::single::prefetch_bytes(
+            &self.blocks[2 * leaf as usize],
+            2 * std::mem::size_of::<Tri4>(),
+        );
     }
 
     /// The structure the mesh was built with.
@@ -426,14 +457,23 @@ impl Mesh {
         let mut best: Option<MeshHit> = None;
         match &self.structure {
             Structure::Bvh => {
-                traverse::<AVX>(&self.bvh, ray, t_min, t_max, false, |leaf, t_max| {
-                    let hit = self.leaf_hit(&wt, leaf, t_min, Self::reach(t_max, &best))?;
-                    if !self.wins(hit.t, hit.triangle, &best) {
-                        return None;
-                    }
-                    best = Some(hit);
-                    Some(hit.t)
-                });
+                traverse_with::<AVX>(
+                    &self.bvh,
+                    ray,
+                    t_min,
+                    t_max,
+                    false,
+                    |leaf, t_max| {
+                        let hit =
+                            self.leaf_hit::<AVX>(&wt, leaf, t_min, Self::reach(t_max, &best))?;
+                        if !self.wins(hit.t, hit.triangle, &best) {
+                            return None;
+                        }
+                        best = Some(hit);
+                        Some(hit.t)
+                    },
+                    |leaf| self.prefetch_leaf(leaf),
+                );
             }
             Structure::Grid(g) => {
                 g.traverse(ray, t_min, t_max, false, |i, t_max| {
@@ -476,7 +516,7 @@ impl Mesh {
         crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
             for_each_lane(hit, |l| {
                 let reach = Self::reach(p.t_max[l], &best[l]);
-                if let Some(h) = self.leaf_hit(&wt[l], leaf, p.t_min[l], reach)
+                if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
                     && self.wins(h.t, h.triangle, &best[l])
                 {
                     p.t_max[l] = h.t;
@@ -511,7 +551,7 @@ impl Mesh {
             let mut now = 0;
             for_each_lane(hit, |l| {
                 if self
-                    .leaf_hit(&wt[l], leaf, p.t_min[l], p.t_max[l])
+                    .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
                     .is_some()
                 {
                     now |= 1 << l;
@@ -549,7 +589,7 @@ impl Mesh {
             for &r in ids {
                 let r = r as usize;
                 let reach = Self::reach(s.t_max[r], &best[r]);
-                if let Some(h) = self.leaf_hit(&wt[r], leaf, s.t_min[r], reach)
+                if let Some(h) = self.leaf_hit::<AVX>(&wt[r], leaf, s.t_min[r], reach)
                     && self.wins(h.t, h.triangle, &best[r])
                 {
                     s.t_max[r] = h.t;
@@ -658,9 +698,15 @@ impl Mesh {
             wt.intersect(p0, p1, p2, t_min, t_max).map(|h| h.0)
         };
         match &self.structure {
-            Structure::Bvh => traverse::<AVX>(&self.bvh, ray, t_min, t_max, true, |leaf, t_max| {
-                self.leaf_hit(&wt, leaf, t_min, t_max).map(|h| h.t)
-            }),
+            Structure::Bvh => traverse_with::<AVX>(
+                &self.bvh,
+                ray,
+                t_min,
+                t_max,
+                true,
+                |leaf, t_max| self.leaf_hit::<AVX>(&wt, leaf, t_min, t_max).map(|h| h.t),
+                |leaf| self.prefetch_leaf(leaf),
+            ),
             Structure::Grid(g) => g.traverse(ray, t_min, t_max, true, tri),
             Structure::KdTree(k) => k.traverse(ray, t_min, t_max, true, tri),
             Structure::Brute => (0..self.corners.len() as u32).any(|i| tri(i, t_max).is_some()),

@@ -442,6 +442,10 @@ fn bench_rays_measures_every_mode_and_agrees_with_the_reference() {
         let agree = m["ref_agree"].as_f64().unwrap();
         assert!(agree >= 1.0 - 5.0 / 64.0, "{m}");
         assert!(m["best_mrays"].as_f64().unwrap() > 0.0);
+        // Unix also gives the rate per CPU second.
+        if cfg!(unix) {
+            assert!(m["best_mrays_per_cpu_s"].as_f64().unwrap() > 0.0, "{m}");
+        }
     }
     // Both SIMD paths can be asked for; a wrong file is a clean error.
     let out = prism()
