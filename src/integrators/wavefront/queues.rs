@@ -357,6 +357,54 @@ soa_queue!(
     [throughput, path, direction, pdf]
 );
 
+/// Rays of a scene with participating media after their closest-hit
+/// test, waiting to be followed through the media (path transport): the
+/// ray and what it hit, if anything.
+#[derive(Clone, Debug, Default)]
+pub struct MediumQueue {
+    /// The rays.
+    pub rays: RayQueue,
+    /// Their closest hits (`None`: escaped).
+    pub hits: Vec<Option<Hit>>,
+}
+
+impl MediumQueue {
+    /// Appends a ray and its closest hit.
+    #[inline]
+    pub fn push(&mut self, ray: RayItem, hit: Option<Hit>) {
+        self.rays.push(ray);
+        self.hits.push(hit);
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.hits.len()
+    }
+
+    /// True when no ray is queued.
+    pub fn is_empty(&self) -> bool {
+        self.hits.is_empty()
+    }
+
+    /// Removes every ray, keeping the buffers.
+    pub fn clear(&mut self) {
+        self.rays.clear();
+        self.hits.clear();
+    }
+
+    /// Appends every ray of `other`, in order.
+    pub fn append(&mut self, other: &MediumQueue) {
+        self.rays.append(&other.rays);
+        self.hits.extend_from_slice(&other.hits);
+    }
+}
+
+impl QueueBytes for MediumQueue {
+    fn bytes(&self) -> usize {
+        self.rays.bytes() + vec_bytes(&self.hits)
+    }
+}
+
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowItem {
