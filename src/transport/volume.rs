@@ -117,12 +117,28 @@ fn is_interface(scene: &RenderScene, hit: &Hit) -> bool {
 }
 
 /// The origin of a ray that carries on through `hit` in direction `dir`:
-/// the hit point moved off the surface to the side `dir` goes.
+/// the hit point moved off the surface to the side `dir` goes, by
+/// [`OFFSET_ULPS`] ulps of the larger of the point's and its instance's
+/// largest coordinate. The hit point's error scales with its object (a
+/// sphere of radius 1000 computes its points to ulps of 1000, even where
+/// the render frame puts them near the origin), so the point's own ulps
+/// ([`offset_origin_relative`], used at scattering surfaces) do not clear a
+/// large boundary seen from close by; without this a ray leaving a large
+/// index-matched sphere found it again just outside.
 #[inline]
-fn beyond(hit: &Hit, dir: Vec3A) -> Vec3A {
+fn beyond(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> Vec3A {
     let n = hit.geometric_normal;
     let side = if n.dot(dir) > 0.0 { n } else { -n };
-    offset_origin_relative(hit.point, side)
+    let size = scene.instances()[hit.instance as usize]
+        .world_bounds()
+        .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element());
+    let magnitude = hit.point.abs().max_element().max(size).max(f32::MIN_POSITIVE);
+    let q = hit.point + side * (OFFSET_ULPS * f32::EPSILON * magnitude);
+    if q.is_finite() {
+        q
+    } else {
+        offset_origin_relative(hit.point, side)
+    }
 }
 
 /// The channel-averaged density of drawing distance `t` by extinction
@@ -282,7 +298,7 @@ pub fn propagate(
         if out.weight == Color::ZERO {
             return out;
         }
-        origin = beyond(&h, dir);
+        origin = beyond(scene, &h, dir);
         out.rays.0 += 1;
         hit = scene.intersect(&Ray::new(origin, dir), 0.0, f32::INFINITY);
     }
@@ -438,7 +454,7 @@ pub fn shadow_transmittance(scene: &RenderScene, ray: &Ray, t_max: f32) -> Color
         if !is_interface(scene, &h) || tr == Color::ZERO {
             return Color::ZERO;
         }
-        origin = beyond(&h, dir);
+        origin = beyond(scene, &h, dir);
         remaining -= h.t;
     }
     Color::ZERO

@@ -56,6 +56,7 @@ mod path;
 mod photon;
 mod radiosity;
 mod robustness;
+mod scattering;
 mod scene_updates;
 mod shards;
 mod texture_lod;
