@@ -122,7 +122,7 @@ fn a_semi_infinite_slab_reflects_chandrasekhars_radiance() {
         for kind in IntegratorKind::ALL {
             let film = render_toml(
                 &chandrasekhar(omega),
-                config(path_settings(16, 16, 64, 1024), kind),
+                config(path_settings(32, 32, 64, 1024), kind),
             )
             .film
             .unwrap();
