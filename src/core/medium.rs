@@ -124,6 +124,111 @@ impl Medium {
     }
 }
 
+/// Gauss-Legendre nodes and weights on `[0, 1]` (`N` points, by Newton's
+/// method on the Legendre polynomial).
+fn gauss_legendre_unit<const N: usize>() -> ([f64; N], [f64; N]) {
+    let mut x = [0.0; N];
+    let mut w = [0.0; N];
+    for i in 0..N {
+        // Initial guess (Tricomi), then Newton on P_N.
+        let mut z = (std::f64::consts::PI * (i as f64 + 0.75) / (N as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0f64, z);
+            for k in 2..=N {
+                let k = k as f64;
+                let p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
+                p0 = p1;
+                p1 = p2;
+            }
+            dp = N as f64 * (z * p1 - p0) / (z * z - 1.0);
+            let dz = p1 / dp;
+            z -= dz;
+            if dz.abs() < 1e-15 {
+                break;
+            }
+        }
+        x[i] = 0.5 * (1.0 - z);
+        w[i] = 1.0 / ((1.0 - z * z) * dp * dp);
+    }
+    (x, w)
+}
+
+/// Chandrasekhar's H-function of isotropic scattering with
+/// single-scattering albedo `omega` at direction cosine `mu`, from its
+/// integral equation in the form `1/H(mu) = sqrt(1 - omega) + (omega/2)
+/// int_0^1 mu' H(mu') / (mu + mu') dmu'`, iterated to convergence on 48
+/// Gauss-Legendre nodes.
+pub fn chandrasekhar_h(omega: f64, mu: f64) -> f64 {
+    const N: usize = 48;
+    let (x, w) = gauss_legendre_unit::<N>();
+    let root = (1.0 - omega).max(0.0).sqrt();
+    let mut h = [1.0f64; N];
+    let integral = |h: &[f64; N], mu: f64| -> f64 {
+        (0..N).map(|j| w[j] * x[j] * h[j] / (mu + x[j])).sum()
+    };
+    for _ in 0..2000 {
+        let mut next = [0.0; N];
+        let mut change = 0.0f64;
+        for i in 0..N {
+            next[i] = 1.0 / (root + 0.5 * omega * integral(&h, x[i]));
+            change = change.max((next[i] - h[i]).abs());
+        }
+        h = next;
+        if change < 1e-13 {
+            break;
+        }
+    }
+    1.0 / (root + 0.5 * omega * integral(&h, mu))
+}
+
+/// The radiance that a semi-infinite, index-matched medium of isotropic
+/// scattering and single-scattering albedo `omega` sends back along its
+/// normal under a uniform sky of radiance 1: `1 - H(1) sqrt(1 - omega)`
+/// (Chandrasekhar).
+pub fn slab_normal_radiance(omega: f64) -> f64 {
+    1.0 - chandrasekhar_h(omega, 1.0) * (1.0 - omega).max(0.0).sqrt()
+}
+
+/// The single-scattering albedo whose semi-infinite slab sends back the
+/// radiance `colour` (in `[0, 1)`) along its normal under a uniform white
+/// sky ([`slab_normal_radiance`] inverted by bisection; it rises
+/// monotonically from 0 to 1).
+pub fn albedo_for_slab_radiance(colour: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for _ in 0..48 {
+        let mid = 0.5 * (lo + hi);
+        if slab_normal_radiance(mid) < colour {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+impl Medium {
+    /// The subsurface medium of a surface colour and a scattering radius
+    /// (per channel): isotropic scattering with mean free path `radius`
+    /// and the single-scattering albedo whose semi-infinite slab, behind
+    /// an index-matched boundary, sends back `colour` along its normal
+    /// under a uniform white sky ([`albedo_for_slab_radiance`]).
+    pub fn subsurface(colour: Color, radius: Color) -> Result<Self, String> {
+        if !(colour.min_element() >= 0.0 && colour.max_element() < 1.0) {
+            return Err(format!(
+                "subsurface colour must lie in [0, 1) per channel, got [{}, {}, {}]",
+                colour.x, colour.y, colour.z
+            ));
+        }
+        let albedo = Color::new(
+            albedo_for_slab_radiance(colour.x as f64) as f32,
+            albedo_for_slab_radiance(colour.y as f64) as f32,
+            albedo_for_slab_radiance(colour.z as f64) as f32,
+        );
+        Self::from_albedo(albedo, radius, 0.0).map_err(|e| e.replace("mean free path", "subsurface radius"))
+    }
+}
+
 /// The Henyey-Greenstein phase function `(1 - g^2) / (4 pi (1 + g^2 - 2 g
 /// cos)^(3/2))` at the cosine `cos` between the propagation directions
 /// before and after scattering (it integrates to one over the sphere).
@@ -192,6 +297,28 @@ mod tests {
             }
             assert!((s / n as f64 - g as f64).abs() < 0.012, "g {g}: {}", s / n as f64);
         }
+    }
+
+    /// The H-function against Chandrasekhar's tabulated results: the
+    /// radiance of the semi-infinite slab seen along its normal, and the
+    /// inversion back to the albedo.
+    #[test]
+    fn slab_radiance_matches_chandrasekhar_and_inverts() {
+        for (omega, r) in [(0.8, 0.285255), (0.9, 0.414947), (0.99, 0.752721)] {
+            let got = slab_normal_radiance(omega);
+            assert!((got - r).abs() < 2e-6, "omega {omega}: {got} vs {r}");
+            let back = albedo_for_slab_radiance(r);
+            assert!((back - omega).abs() < 1e-5, "{back} vs {omega}");
+        }
+        // Conservative scattering: H(1) is finite (about 2.9078) and the
+        // slab reflects everything.
+        assert!((chandrasekhar_h(1.0, 1.0) - 2.9078).abs() < 1e-3);
+        assert!(slab_normal_radiance(0.0).abs() < 1e-12);
+        let m = Medium::subsurface(Color::new(0.8, 0.5, 0.0), Color::splat(0.5)).unwrap();
+        assert_eq!(m.sigma_t(), Color::splat(2.0));
+        assert_eq!(m.sigma_s.z, 0.0);
+        assert!(Medium::subsurface(Color::ONE, Color::ONE).is_err());
+        assert!(Medium::subsurface(Color::splat(0.5), Color::ZERO).is_err());
     }
 
     #[test]

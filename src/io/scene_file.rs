@@ -274,6 +274,12 @@ struct FileMaterial {
     albedo: Option<FileColor>,
     /// Mean free path inside (per channel, scene units).
     mean_free_path: Option<FileColor>,
+    /// Subsurface scattering: the colour a large slab of the material
+    /// shows (see the README's "Subsurface scattering"), with
+    /// `subsurface_radius`.
+    subsurface_color: Option<FileColor>,
+    /// Subsurface scattering: the mean free path per channel.
+    subsurface_radius: Option<FileColor>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -894,13 +900,50 @@ impl Ctx<'_> {
         let (dispersion, ior) = dispersion(m)?;
         let ior = ior.unwrap_or(d.ior);
         let sigma_a = absorption(m)?;
-        let interior = medium_parameters(
-            Some(sigma_a),
-            m.scattering,
-            m.g,
-            m.albedo,
-            m.mean_free_path,
-        )?;
+        let (interior, subsurface) = match (m.subsurface_color, m.subsurface_radius) {
+            (None, None) => (
+                medium_parameters(
+                    Some(sigma_a),
+                    m.scattering,
+                    m.g,
+                    m.albedo,
+                    m.mean_free_path,
+                )?,
+                false,
+            ),
+            (Some(c), Some(r)) => {
+                if sigma_a != Color::ZERO
+                    || m.scattering.is_some()
+                    || m.albedo.is_some()
+                    || m.mean_free_path.is_some()
+                    || m.g.is_some()
+                {
+                    return Err("subsurface_color and subsurface_radius define the interior: give no absorption, attenuation, scattering, g, albedo or mean_free_path with them".into());
+                }
+                (Medium::subsurface(c.get(), r.get())?, true)
+            }
+            _ => {
+                return Err("subsurface_color and subsurface_radius must be given together".into());
+            }
+        };
+        // A subsurface material's surface is, unless told otherwise, an
+        // index-matched boundary (the colour is the medium's).
+        let d = if subsurface {
+            Material {
+                base_color: Color::ONE,
+                diffuse: 0.0,
+                transmission: 1.0,
+                ior: m.ior.unwrap_or(1.0),
+                ..d
+            }
+        } else {
+            d
+        };
+        let ior = if subsurface && m.ior.is_none() && dispersion.is_none() {
+            1.0
+        } else {
+            ior
+        };
         if !(ior.is_finite() && ior > 0.0) {
             return Err(format!("ior must be a positive finite number, got {ior}"));
         }
@@ -911,7 +954,7 @@ impl Ctx<'_> {
             specular: color(m.specular, d.specular, "specular")?,
             shininess,
             mirror: color(m.mirror, d.mirror, "mirror")?,
-            transmission: unit_interval("transmission", m.transmission.unwrap_or(0.0))?,
+            transmission: unit_interval("transmission", m.transmission.unwrap_or(d.transmission))?,
             ior,
             emission: color(m.emission, d.emission, "emission")?,
             absorption: interior.sigma_a,

@@ -212,3 +212,106 @@ fn media_images_are_bit_identical_across_threads_and_integrators_agree() {
     // of the lights back before it reaches anything).
     assert!(rec.pixels.iter().all(|p| p.max_element() > 0.0));
 }
+
+/// Per-channel mean and standard error of the mean over the pixels.
+fn channel_stats(film: &Film) -> [(f64, f64); 3] {
+    let n = film.pixels.len() as f64;
+    std::array::from_fn(|c| {
+        let v: Vec<f64> = film.pixels.iter().map(|p| p[c] as f64).collect();
+        let mean = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        (mean, (var / n).sqrt())
+    })
+}
+
+/// The Chandrasekhar rig (an index-matched sphere of radius 1000 seen
+/// straight down under a white sky) with the subsurface material `material`.
+fn subsurface_slab(material: &str) -> String {
+    format!(
+        r#"
+[camera]
+look_from = [0, 1005, 0]
+look_at = [0, 0, 0]
+up = [0, 0, -1]
+ortho_half_height = 0.5
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1000.0 }}
+material = {material}
+"#
+    )
+}
+
+/// Subsurface scattering: a large slab of the material sends back its
+/// `subsurface_color` along the normal under a uniform white sky, every
+/// channel within 2% (after checking that the standard error is below a
+/// third of that), in both integrators.
+#[test]
+fn a_large_subsurface_slab_reflects_its_colour() {
+    let colour = [0.8f64, 0.5, 0.2];
+    let scene = subsurface_slab(
+        "{ subsurface_color = [0.8, 0.5, 0.2], subsurface_radius = [1.0, 0.5, 0.25] }",
+    );
+    for kind in IntegratorKind::ALL {
+        let film = render_toml(&scene, config(path_settings(32, 32, 64, 1024), kind))
+            .film
+            .unwrap();
+        for (c, (mean, se)) in channel_stats(&film).into_iter().enumerate() {
+            let tol = 0.02 * colour[c];
+            assert!(se < tol / 3.0, "{kind:?} channel {c}: standard error {se}");
+            assert!(
+                (mean - colour[c]).abs() < tol,
+                "{kind:?} channel {c}: {mean} (se {se}) vs {}",
+                colour[c]
+            );
+        }
+    }
+}
+
+/// A subsurface ball whose radius (mean free path) is small against its
+/// size looks, seen along the normal under a uniform white sky, like a
+/// Lambertian ball of the same colour (radiance = albedo): the centre of
+/// each within 4 combined standard errors of the other. (Away from the
+/// normal they differ: the semi-infinite medium is brighter at grazing
+/// angles than a Lambertian surface; see the README.)
+#[test]
+fn a_subsurface_ball_of_tiny_radius_matches_the_lambertian_along_the_normal() {
+    let ball = |material: &str| {
+        format!(
+            r#"
+[camera]
+look_from = [0, 0, 5]
+look_at = [0, 0, 0]
+ortho_half_height = 0.1
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1.0 }}
+material = {material}
+"#
+        )
+    };
+    let settings = path_settings(16, 16, 64, 1024);
+    let sss = render_toml(
+        &ball("{ subsurface_color = 0.6, subsurface_radius = 0.002 }"),
+        config(settings.clone(), IntegratorKind::Recursive),
+    )
+    .film
+    .unwrap();
+    let lambert = render_toml(
+        &ball("{ color = 0.6 }"),
+        config(settings, IntegratorKind::Recursive),
+    )
+    .film
+    .unwrap();
+    let (a, sa) = mean_and_error(&sss);
+    let (b, sb) = mean_and_error(&lambert);
+    let combined = (sa * sa + sb * sb).sqrt();
+    assert!(combined < 0.004, "standard error {combined} too large");
+    assert!(
+        (a - b).abs() < 4.0 * combined,
+        "subsurface {a} (se {sa}) vs Lambertian {b} (se {sb})"
+    );
+    assert!((b - 0.6).abs() < 4.0 * sb, "Lambertian {b} (se {sb})");
+}
