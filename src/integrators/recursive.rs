@@ -137,7 +137,7 @@ fn trace_path_in<const MEDIA: bool>(
     loop {
         let found = scene.intersect(&ray, 0.0, f32::INFINITY);
         let (hit, distance) = if MEDIA {
-            let seg = volume::propagate(scene, &ray, found, depth, sampler);
+            let seg = volume::propagate(scene, &ray, found, depth, throughput, sampler);
             counters.rays.refraction += seg.rays.0;
             counters.rays.shadow += seg.rays.1;
             radiance += throughput * seg.radiance;

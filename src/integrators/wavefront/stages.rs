@@ -222,7 +222,14 @@ pub fn sample_media(
             let item = media.rays.get(i);
             let (pixel, sample) = paths.sampler_keys(first + item.path as u64);
             let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
-            let seg = volume::propagate(scene, &item.ray, media.hits[i], item.depth, &mut sampler);
+            let seg = volume::propagate(
+                scene,
+                &item.ray,
+                media.hits[i],
+                item.depth,
+                item.throughput,
+                &mut sampler,
+            );
             shaded.count_rays(seg.rays.0, seg.rays.1);
             if seg.radiance != Color::ZERO {
                 shaded.emit(item.path, item.throughput * seg.radiance);
