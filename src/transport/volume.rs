@@ -267,11 +267,16 @@ pub fn propagate(
         radiance: Color::ZERO,
         rays: (0, 0),
     };
+    // Each part is measured from `origin`, where the segment or its last
+    // crossing began; its closest hit was found from `origin` moved off the
+    // boundary (see `beyond`), `lead` further along the ray, so that the
+    // sliver between the boundary and the moved origin keeps its medium.
     let mut origin = ray.origin;
+    let mut lead = 0.0f32;
     let mut hit = hit;
     let mut travelled = 0.0f32;
     for crossing in 0..MAX_CROSSINGS {
-        let t_end = hit.map_or(f32::INFINITY, |h| h.t);
+        let t_end = hit.map_or(f32::INFINITY, |h| h.t + lead);
         if let Some(m) = segment_medium(scene, hit.as_ref(), dir) {
             if m.scatters() {
                 sampler.set_dimension(medium_dimension(depth, crossing));
@@ -311,7 +316,7 @@ pub fn propagate(
             out.end = SegmentEnd::Escaped(dir);
             return out;
         };
-        travelled += h.t;
+        travelled += t_end;
         if !is_interface(scene, &h) {
             out.end = SegmentEnd::Surface {
                 hit: Hit { t: travelled, ..h },
@@ -322,9 +327,11 @@ pub fn propagate(
         if out.weight == Color::ZERO {
             return out;
         }
-        origin = beyond(scene, &h, dir);
+        let start = beyond(scene, &h, dir);
+        origin = h.point;
+        lead = (start - h.point).dot(dir).max(0.0);
         out.rays.0 += 1;
-        hit = scene.intersect(&Ray::new(origin, dir), 0.0, f32::INFINITY);
+        hit = scene.intersect(&Ray::new(start, dir), 0.0, f32::INFINITY);
     }
     out
 }
@@ -461,26 +468,30 @@ impl Equiangular {
 pub fn shadow_transmittance(scene: &RenderScene, ray: &Ray, t_max: f32) -> Color {
     let len = ray.direction.length();
     let dir = ray.direction / len;
-    let mut origin = ray.origin;
+    // As in `propagate`: distances from the boundary last crossed, hits
+    // found from just beyond it, `lead` further on.
+    let mut start = ray.origin;
+    let mut lead = 0.0f32;
     let mut remaining = t_max * len;
     let mut tr = Color::ONE;
     for _ in 0..MAX_CROSSINGS {
-        let hit = scene.intersect(&Ray::new(origin, dir), 0.0, f32::INFINITY);
-        let reach = hit.map_or(f32::INFINITY, |h| h.t);
+        let hit = scene.intersect(&Ray::new(start, dir), 0.0, f32::INFINITY);
+        let reach = hit.map_or(f32::INFINITY, |h| h.t + lead);
         if let Some(m) = segment_medium(scene, hit.as_ref(), dir) {
             tr *= m.transmittance(reach.min(remaining));
         }
         let Some(h) = hit else {
             return tr;
         };
-        if h.t >= remaining {
+        if reach >= remaining {
             return tr;
         }
         if !is_interface(scene, &h) || tr == Color::ZERO {
             return Color::ZERO;
         }
-        origin = beyond(scene, &h, dir);
-        remaining -= h.t;
+        start = beyond(scene, &h, dir);
+        remaining -= reach;
+        lead = (start - h.point).dot(dir).max(0.0);
     }
     Color::ZERO
 }
