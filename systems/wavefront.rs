@@ -645,11 +645,10 @@ pub fn render_wavefront(world: &mut World) {
     }
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
-    let media =
-        scene.has_media() && settings.transport == crate::core::settings::Transport::Path;
+    let media = scene.has_media() && settings.transport == crate::core::settings::Transport::Path;
     // Gooch shading traces no shadow rays; scattering events in media do.
-    let shadows = (features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch)
-        || media;
+    let shadows =
+        (features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch) || media;
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     let paths = settings.path_map();

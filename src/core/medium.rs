@@ -116,11 +116,7 @@ impl Medium {
             ));
         }
         let sigma_t = Color::ONE / l;
-        Self::checked(
-            (Color::ONE - albedo) * sigma_t,
-            albedo * sigma_t,
-            g,
-        )
+        Self::checked((Color::ONE - albedo) * sigma_t, albedo * sigma_t, g)
     }
 }
 
@@ -164,9 +160,8 @@ pub fn chandrasekhar_h(omega: f64, mu: f64) -> f64 {
     let (x, w) = gauss_legendre_unit::<N>();
     let root = (1.0 - omega).max(0.0).sqrt();
     let mut h = [1.0f64; N];
-    let integral = |h: &[f64; N], mu: f64| -> f64 {
-        (0..N).map(|j| w[j] * x[j] * h[j] / (mu + x[j])).sum()
-    };
+    let integral =
+        |h: &[f64; N], mu: f64| -> f64 { (0..N).map(|j| w[j] * x[j] * h[j] / (mu + x[j])).sum() };
     for _ in 0..2000 {
         let mut next = [0.0; N];
         let mut change = 0.0f64;
@@ -225,7 +220,8 @@ impl Medium {
             albedo_for_slab_radiance(colour.y as f64) as f32,
             albedo_for_slab_radiance(colour.z as f64) as f32,
         );
-        Self::from_albedo(albedo, radius, 0.0).map_err(|e| e.replace("mean free path", "subsurface radius"))
+        Self::from_albedo(albedo, radius, 0.0)
+            .map_err(|e| e.replace("mean free path", "subsurface radius"))
     }
 }
 
@@ -295,7 +291,11 @@ mod tests {
                 );
                 s += sample_henyey_greenstein(f, g, u).dot(f) as f64;
             }
-            assert!((s / n as f64 - g as f64).abs() < 0.012, "g {g}: {}", s / n as f64);
+            assert!(
+                (s / n as f64 - g as f64).abs() < 0.012,
+                "g {g}: {}",
+                s / n as f64
+            );
         }
     }
 

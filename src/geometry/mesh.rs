@@ -1029,7 +1029,11 @@ pub fn is_closed(data: &MeshData) -> bool {
     // Directed edge -> count.
     let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
     for t in &data.indices {
-        let Some(v) = t.iter().map(|&i| welded.get(i as usize).copied()).collect::<Option<Vec<u32>>>() else {
+        let Some(v) = t
+            .iter()
+            .map(|&i| welded.get(i as usize).copied())
+            .collect::<Option<Vec<u32>>>()
+        else {
             return false;
         };
         if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {

@@ -15,6 +15,7 @@ use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
+use crate::core::medium::Medium;
 use crate::core::optics;
 use crate::core::spectrum::{Dispersion, LAMBDA_D, Sellmeier};
 use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
@@ -25,7 +26,6 @@ use crate::io::desc::{Geometry, LightDesc, ObjectDesc, SceneDesc, SettingsDesc};
 use crate::scene::camera::Camera;
 use crate::scene::environment::{Environment, EnvironmentSource};
 use crate::scene::light::Light;
-use crate::core::medium::Medium;
 use crate::scene::material::{ImageTexture, Material, Texture, UvTransform};
 
 #[derive(Deserialize, Default)]
@@ -581,7 +581,10 @@ fn medium_parameters(
         }
         (Some(a), Some(l)) => {
             if absorbing.is_some_and(|a| a != Color::ZERO) || scattering.is_some() {
-                return Err("give either absorption/scattering or albedo with mean_free_path, not both".into());
+                return Err(
+                    "give either absorption/scattering or albedo with mean_free_path, not both"
+                        .into(),
+                );
             }
             Medium::from_albedo(a.get(), l.get(), g)
         }
@@ -902,13 +905,7 @@ impl Ctx<'_> {
         let sigma_a = absorption(m)?;
         let (interior, subsurface) = match (m.subsurface_color, m.subsurface_radius) {
             (None, None) => (
-                medium_parameters(
-                    Some(sigma_a),
-                    m.scattering,
-                    m.g,
-                    m.albedo,
-                    m.mean_free_path,
-                )?,
+                medium_parameters(Some(sigma_a), m.scattering, m.g, m.albedo, m.mean_free_path)?,
                 false,
             ),
             (Some(c), Some(r)) => {

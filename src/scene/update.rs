@@ -7,7 +7,9 @@ use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
-use crate::scene::render_scene::{RenderScene, has_cutouts, has_dispersion, has_scattering, resolve_lights};
+use crate::scene::render_scene::{
+    RenderScene, has_cutouts, has_dispersion, has_scattering, resolve_lights,
+};
 use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.

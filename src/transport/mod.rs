@@ -7,6 +7,6 @@ pub mod gooch;
 pub mod interaction;
 pub mod medium;
 pub mod path;
-pub mod volume;
 pub mod photon;
+pub mod volume;
 pub mod whitted;

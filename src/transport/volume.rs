@@ -136,7 +136,12 @@ fn beyond(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> Vec3A {
     let size = scene.instances()[hit.instance as usize]
         .world_bounds()
         .map_or(0.0, |b| b.min.abs().max(b.max.abs()).max_element());
-    let magnitude = hit.point.abs().max_element().max(size).max(f32::MIN_POSITIVE);
+    let magnitude = hit
+        .point
+        .abs()
+        .max_element()
+        .max(size)
+        .max(f32::MIN_POSITIVE);
     let q = hit.point + side * (OFFSET_ULPS * f32::EPSILON * magnitude);
     if q.is_finite() {
         q
@@ -707,12 +712,8 @@ mod tests {
     /// so that the expectation over the choice is unchanged.
     #[test]
     fn chromatic_extinction_narrows_the_path_to_one_channel() {
-        let grey = Medium::checked(
-            Color::new(0.1, 0.2, 0.3),
-            Color::new(0.9, 0.8, 0.7),
-            0.0,
-        )
-        .unwrap();
+        let grey =
+            Medium::checked(Color::new(0.1, 0.2, 0.3), Color::new(0.9, 0.8, 0.7), 0.0).unwrap();
         let mut w = Color::new(0.5, 0.25, 1.0);
         assert_eq!(extinction_for(&grey, [true; 3], 0.9, &mut w), Some(1.0));
         assert_eq!(w, Color::new(0.5, 0.25, 1.0));

@@ -799,7 +799,8 @@ fn bad_media_fail_cleanly_naming_the_object() {
     };
     let sphere = "{ type = \"sphere\", radius = 1.0 }";
     // An open mesh: one triangle.
-    let open = "{ type = \"mesh\", positions = [[0, 0, 0], [1, 0, 0], [0, 1, 0]], indices = [[0, 1, 2]] }";
+    let open =
+        "{ type = \"mesh\", positions = [[0, 0, 0], [1, 0, 0], [0, 1, 0]], indices = [[0, 1, 2]] }";
     for (i, (scene, words)) in [
         (
             ball("smoke", sphere, "scattering = [1, -1, 1]"),
@@ -834,7 +835,11 @@ fn bad_media_fail_cleanly_naming_the_object() {
             &["sheet", "not closed"][..],
         ),
         (
-            ball("disk", "{ type = \"disk\", radius = 1.0 }", "scattering = 1"),
+            ball(
+                "disk",
+                "{ type = \"disk\", radius = 1.0 }",
+                "scattering = 1",
+            ),
             &["disk", "not closed"][..],
         ),
         (

@@ -198,8 +198,14 @@ fn foggy(kind: IntegratorKind, threads: usize) -> Film {
 fn media_images_are_bit_identical_across_threads_and_integrators_agree() {
     let rec = foggy(IntegratorKind::Recursive, 1);
     let wav = foggy(IntegratorKind::Wavefront, 1);
-    assert_eq!(film_bits(&rec), film_bits(&foggy(IntegratorKind::Recursive, 2)));
-    assert_eq!(film_bits(&wav), film_bits(&foggy(IntegratorKind::Wavefront, 2)));
+    assert_eq!(
+        film_bits(&rec),
+        film_bits(&foggy(IntegratorKind::Recursive, 2))
+    );
+    assert_eq!(
+        film_bits(&wav),
+        film_bits(&foggy(IntegratorKind::Wavefront, 2))
+    );
     for (i, (a, b)) in rec.pixels.iter().zip(&wav.pixels).enumerate() {
         let d = (*a - *b).abs().max_element();
         assert!(

@@ -107,12 +107,10 @@ impl RoutedChunk {
         hit: Option<Hit>,
     ) {
         match hit {
-            None if environment => self.escaped.push_toward(
-                item.path,
-                item.throughput,
-                item.ray.direction,
-                item.pdf,
-            ),
+            None if environment => {
+                self.escaped
+                    .push_toward(item.path, item.throughput, item.ray.direction, item.pdf)
+            }
             None => self.escaped.push(item.path, item.throughput),
             Some(h) => {
                 let class = classes[h.material as usize];

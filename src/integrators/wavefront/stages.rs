@@ -257,9 +257,13 @@ pub fn sample_media(
                     volume::medium_next_event(scene, settings, &v, &mut sampler, item.depth, |q| {
                         shaded.push_shadow_from(item.path, throughput, q)
                     });
-                    if let Some(c) =
-                        volume::continue_in_medium(settings, &v, item.depth, throughput, &mut sampler)
-                    {
+                    if let Some(c) = volume::continue_in_medium(
+                        settings,
+                        &v,
+                        item.depth,
+                        throughput,
+                        &mut sampler,
+                    ) {
                         let next = RayItem {
                             ray: c.sample.ray,
                             throughput: throughput * c.sample.weight * c.scale,
