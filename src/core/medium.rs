@@ -190,6 +190,9 @@ pub fn slab_normal_radiance(omega: f64) -> f64 {
 /// sky ([`slab_normal_radiance`] inverted by bisection; it rises
 /// monotonically from 0 to 1).
 pub fn albedo_for_slab_radiance(colour: f64) -> f64 {
+    if colour <= 0.0 {
+        return 0.0;
+    }
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     for _ in 0..48 {
         let mid = 0.5 * (lo + hi);

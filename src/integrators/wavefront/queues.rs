@@ -94,7 +94,7 @@ pub struct RayQueue {
 
 impl RayQueue {
     /// Appends a ray.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: RayItem) {
         debug_assert!(
             item.ray.origin.is_finite() && item.ray.direction.is_finite(),
@@ -247,7 +247,7 @@ pub struct HitQueue {
 
 impl HitQueue {
     /// Appends a hit.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: HitItem) {
         debug_assert!(
             item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
@@ -333,7 +333,7 @@ pub struct EscapedQueue {
 impl EscapedQueue {
     /// Appends an escaped ray of a scene without an environment (it
     /// brings back the constant background).
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, path: u32, throughput: Color) {
         debug_assert!(throughput.is_finite());
         self.throughput.push(throughput);
@@ -342,7 +342,7 @@ impl EscapedQueue {
 
     /// Appends an escaped ray with the direction and density the
     /// environment is looked up and weighted with.
-    #[inline]
+    #[inline(always)]
     pub fn push_toward(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
         self.push(path, throughput);
         self.direction.push(direction);
@@ -435,7 +435,7 @@ pub struct ShadowQueue {
 
 impl ShadowQueue {
     /// Appends a shadow ray.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: ShadowItem) {
         debug_assert!(
             item.ray.origin.is_finite() && item.ray.direction.is_finite(),

@@ -352,20 +352,35 @@ fn shade_hits(
             // media, path transport has weighed the segment in
             // `sample_media`, and Whitted transport attenuates it by its
             // medium's extinction.
-            if !scene.has_media() {
-                if let Some(tr) = interior_transmittance(&it, h.distance) {
-                    h.throughput *= tr;
-                }
-            } else if settings.transport != Transport::Path
-                && let Some(tr) =
-                    volume::whitted_transmittance(scene, Some(&h.hit()), h.direction, h.distance)
-            {
+            let tr = if scene.has_media() {
+                whitted_media_transmittance(scene, settings, &h)
+            } else {
+                interior_transmittance(&it, h.distance)
+            };
+            if let Some(tr) = tr {
                 h.throughput *= tr;
             }
             kernel(&h, &it, out);
         }
     });
     join_shade_outputs(outputs, to);
+}
+
+/// The attenuation of hit `h`'s segment in a scene with media: by its
+/// medium's extinction under Whitted transport, none under path transport
+/// (`sample_media` has weighed it). Out of line: scenes without media
+/// never call it.
+#[cold]
+#[inline(never)]
+fn whitted_media_transmittance(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    h: &HitItem,
+) -> Option<Color> {
+    if settings.transport == Transport::Path {
+        return None;
+    }
+    volume::whitted_transmittance(scene, Some(&h.hit()), h.direction, h.distance)
 }
 
 /// Stage, Whitted transport: shades every hit of one material class.
