@@ -40,6 +40,8 @@ pub struct RenderConfig {
     /// Light from infinitely far away; escaped rays bring back its
     /// radiance instead of `background` when present.
     pub environment: Option<Environment>,
+    /// The medium outside every object (global fog), if any.
+    pub fog: Option<crate::core::medium::Medium>,
     /// Optional progress callback.
     pub progress: Option<ProgressFn>,
 }
@@ -53,6 +55,7 @@ impl Default for RenderConfig {
             bvh_quality: BuildQuality::default(),
             background: Color::ZERO,
             environment: None,
+            fog: None,
             progress: None,
         }
     }

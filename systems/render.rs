@@ -48,6 +48,14 @@ pub fn frame_preconditions(world: &mut World) -> Option<(Arc<RenderScene>, Camer
             .scene
             .clone()
             .ok_or_else(|| "no acceleration structure was built".to_string())?;
+        let transport = world.resource::<RenderConfig>().settings.transport;
+        if scene.has_media() && matches!(transport, Transport::Photon | Transport::Radiosity) {
+            return Err(format!(
+                "{} transport does not render participating media (the scene has a [medium] fog or \
+a scattering interior): use --transport path, or whitted (which attenuates by Beer-Lambert only)",
+                transport.name()
+            ));
+        }
         Ok((scene, camera))
     })();
     match result {

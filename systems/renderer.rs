@@ -55,6 +55,7 @@ impl Renderer {
         let mut r = Self::new();
         config.background = desc.background;
         config.environment = desc.environment.clone();
+        config.fog = desc.fog;
         r.cameras = spawn_scene(&mut r.world, desc);
         config.camera = Some(*r.cameras.get(camera).ok_or_else(|| {
             crate::Error::Invalid(format!(

@@ -144,9 +144,9 @@ fn remove_object(scene: &mut RenderScene, sync: &mut SceneSync, e: Entity) {
 pub fn prepare_sync(world: &mut World) {
     let start = Instant::now();
     world.remove_resource::<super::wavefront::WavefrontFrame>();
-    let (background, environment, quality) = {
+    let (background, environment, fog, quality) = {
         let c = world.resource::<RenderConfig>();
-        (c.background, c.environment.clone(), c.bvh_quality)
+        (c.background, c.environment.clone(), c.fog, c.bvh_quality)
     };
     let same_quality = world.resource::<SceneSync>().quality == Some(quality);
     let mut accel = world.resource_mut::<SceneAccel>();
@@ -160,12 +160,18 @@ pub fn prepare_sync(world: &mut World) {
             RenderScene::new(Vec::new(), Vec::new(), Vec::new(), background, quality)
                 .with_environment(environment),
         ));
+        if let Some(s) = accel.scene.as_mut().and_then(Arc::get_mut) {
+            s.set_fog(fog);
+        }
     } else if let Some(s) = accel.scene.as_mut().and_then(Arc::get_mut) {
         if s.background() != background {
             s.set_background(background);
         }
         if s.environment() != environment.as_ref() {
             s.set_environment(environment);
+        }
+        if s.fog() != fog.as_ref() {
+            s.set_fog(fog);
         }
     }
     let rebased = choose_origin(world, !usable);

@@ -31,11 +31,11 @@ use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
+    EscapedQueue, HitQueue, MediumQueue, QueueBytes, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{ClassHitQueues, ShadeTargets};
 use crate::integrators::wavefront::stages::{
-    self as kernels, RoutingScratch, ShadeScratch, ShadowScratch,
+    self as kernels, MediaScratch, MediaTargets, RoutingScratch, ShadeScratch, ShadowScratch,
 };
 use crate::integrators::wavefront::{self, Stage, StageSeconds, WavefrontReport};
 use crate::scene::RenderScene;
@@ -58,8 +58,11 @@ pub struct FinishBatch;
 /// The stages of a bounce, in order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum WavefrontSystems {
-    /// Closest hits; routing to the escaped and per-class hit queues.
+    /// Closest hits; routing to the escaped and per-class hit queues (or,
+    /// with media, to the medium queue).
     IntersectClosest,
+    /// Rays followed through participating media (scenes with media).
+    SampleMedia,
     /// Background radiance for rays that left the scene.
     HandleEscapedRays,
     /// One shading system per material class.
@@ -77,6 +80,10 @@ pub struct CurrentRays(pub RayQueue);
 /// Rays spawned for the next bounce.
 #[derive(Resource, Default)]
 pub struct NextRays(pub RayQueue);
+
+/// Rays of a scene with media waiting to be followed through them.
+#[derive(Resource, Default)]
+pub struct MediaRays(pub MediumQueue);
 
 /// Rays that missed everything this bounce.
 #[derive(Resource, Default)]
@@ -209,6 +216,7 @@ pub struct PixelSums(pub PixelAccumulator);
 #[derive(Resource, Default)]
 pub struct StageScratch {
     routing: RoutingScratch,
+    media: MediaScratch,
     shading: ShadeScratch,
     shadows: ShadowScratch,
 }
@@ -228,6 +236,7 @@ impl StageScratch {
     /// Bytes allocated by all scratch buffers.
     pub fn bytes(&self) -> usize {
         self.routing.iter().map(|c| c.bytes()).sum::<usize>()
+            + self.media.iter().map(|c| c.bytes()).sum::<usize>()
             + self.shadows.bytes()
             + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
@@ -255,6 +264,9 @@ pub struct WavefrontFrame {
     /// Whether shadow rays can occur (see
     /// [`SceneFeatures::needs_shadow_rays`]).
     pub shadows: bool,
+    /// Whether rays are followed through participating media: path
+    /// transport of a scene with media ([`RenderScene::has_media`]).
+    pub media: bool,
 }
 
 /// Counters and timings of the frame.
@@ -289,6 +301,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     bounce.configure_sets(
         (
             WavefrontSystems::IntersectClosest,
+            WavefrontSystems::SampleMedia,
             WavefrontSystems::HandleEscapedRays,
             WavefrontSystems::ShadeMaterials,
             WavefrontSystems::TraceShadowRays,
@@ -298,6 +311,9 @@ pub fn add_wavefront_schedules(world: &mut World) {
     );
     bounce.add_systems((
         intersect_closest.in_set(WavefrontSystems::IntersectClosest),
+        sample_media
+            .run_if(media_present)
+            .in_set(WavefrontSystems::SampleMedia),
         handle_escaped_rays.in_set(WavefrontSystems::HandleEscapedRays),
         (
             shade_emissive.run_if(class_present::<Emissive>),
@@ -325,6 +341,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<CurrentRays>();
     world.init_resource::<NextRays>();
     world.init_resource::<EscapedRays>();
+    world.init_resource::<MediaRays>();
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathRadiance>();
@@ -338,6 +355,11 @@ pub fn add_wavefront_schedules(world: &mut World) {
 /// Run condition: the scene has a material of class `C`.
 pub fn class_present<C: ClassMarker>(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
     gating.force_all || frame.features.has(C::CLASS)
+}
+
+/// Run condition: rays are followed through media.
+pub fn media_present(frame: Res<WavefrontFrame>, gating: Res<StageGating>) -> bool {
+    gating.force_all || frame.media
 }
 
 /// Run condition: the scene can produce shadow rays.
@@ -376,6 +398,7 @@ pub fn intersect_closest(
     mut scratch: ResMut<StageScratch>,
     mut escaped: ResMut<EscapedRays>,
     mut hits: HitQueuesMut,
+    mut media: ResMut<MediaRays>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::IntersectClosest, |_| {
@@ -386,7 +409,54 @@ pub fn intersect_closest(
             &mut scratch.routing,
             &mut escaped.0,
             &mut hits,
+            (frame.media, &mut media.0),
         )
+    });
+}
+
+/// Stage: follows the rays of a scene with media through them; drains
+/// the medium queue into the escaped and hit queues, the paths'
+/// radiance, the shadow queue and the next bounce's rays.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_media(
+    config: Res<RenderConfig>,
+    frame: Res<WavefrontFrame>,
+    mut media: ResMut<MediaRays>,
+    mut escaped: ResMut<EscapedRays>,
+    mut hits: HitQueuesMut,
+    params: ShadeParams,
+) {
+    let ShadeParams {
+        mut scratch,
+        mut radiance,
+        mut shadows,
+        mut next,
+        mut stats,
+        ..
+    } = params;
+    let first = frame.batches[frame.batch].0;
+    stats.0.run_stage(Stage::SampleMedia, |counters| {
+        let to = MediaTargets {
+            escaped: &mut escaped.0,
+            hits: &mut hits,
+            shade: ShadeTargets {
+                radiance: &mut radiance.0,
+                shadows: &mut shadows.0,
+                next: &mut next.0,
+                rays: &mut counters.rays,
+            },
+        };
+        kernels::sample_media(
+            &frame.scene,
+            &config.settings,
+            &frame.paths,
+            first,
+            &frame.classes,
+            &media.0,
+            &mut scratch.media,
+            to,
+        );
+        media.0.clear();
     });
 }
 
@@ -491,6 +561,7 @@ pub fn trace_shadow_rays(
             &shadows.0,
             &mut scratch.shadows,
             &mut radiance.0,
+            frame.media,
         );
         shadows.0.clear();
     });
@@ -507,11 +578,13 @@ pub fn record_queue_bytes(
     shadows: Res<ShadowRays>,
     scratch: Res<StageScratch>,
     radiance: Res<PathRadiance>,
+    media: Res<MediaRays>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     let bytes = rays.0.bytes()
         + next.0.bytes()
         + escaped.0.bytes()
+        + media.0.bytes()
         + hits.bytes()
         + shadows.0.bytes()
         + scratch.bytes()
@@ -572,8 +645,10 @@ pub fn render_wavefront(world: &mut World) {
     }
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();
     let features = SceneFeatures::of(&scene);
-    // Gooch shading traces no shadow rays.
-    let shadows = features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch;
+    let media = scene.has_media() && settings.transport == crate::core::settings::Transport::Path;
+    // Gooch shading traces no shadow rays; scattering events in media do.
+    let shadows =
+        (features.needs_shadow_rays(settings.transport) && settings.style != Style::Gooch) || media;
     let batch_size = world.resource::<BatchSize>().0;
     let batches: Vec<(u64, usize)> = wavefront::batch_ranges(settings, batch_size).collect();
     let paths = settings.path_map();
@@ -588,6 +663,7 @@ pub fn render_wavefront(world: &mut World) {
         batch: 0,
         features,
         shadows,
+        media,
     });
     world.insert_resource(PixelSums(PixelAccumulator::new(window_width, window_rows)));
     world.insert_resource(WavefrontStats::default());
@@ -641,6 +717,7 @@ mod tests {
         match stage {
             Stage::GenerateCameraRays => name(&generate_camera_rays),
             Stage::IntersectClosest => name(&intersect_closest),
+            Stage::SampleMedia => name(&sample_media),
             Stage::HandleEscapedRays => name(&handle_escaped_rays),
             Stage::ShadeEmissive => name(&shade_emissive),
             Stage::ShadeDiffuse => name(&shade_diffuse),

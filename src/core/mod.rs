@@ -7,6 +7,7 @@ pub mod clip;
 pub mod counters;
 pub mod error;
 pub mod math;
+pub mod medium;
 pub mod microfacet;
 pub mod optics;
 pub mod photon_settings;

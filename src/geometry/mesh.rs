@@ -1057,3 +1057,40 @@ mod tangent_tests {
         assert!(bare.with_tangents(None).unwrap().tangents.is_none());
     }
 }
+
+/// True when the triangles of `data` close a volume: after merging
+/// vertices at the same position, every edge is shared by exactly two
+/// triangles that run along it in opposite directions (a closed,
+/// consistently oriented surface). Degenerate triangles are ignored;
+/// out-of-range indices make the mesh not closed.
+pub fn is_closed(data: &MeshData) -> bool {
+    use std::collections::HashMap;
+    let mut id: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut welded = Vec::with_capacity(data.positions.len());
+    for p in &data.positions {
+        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let next = id.len() as u32;
+        welded.push(*id.entry(key).or_insert(next));
+    }
+    // Directed edge -> count.
+    let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
+    for t in &data.indices {
+        let Some(v) = t
+            .iter()
+            .map(|&i| welded.get(i as usize).copied())
+            .collect::<Option<Vec<u32>>>()
+        else {
+            return false;
+        };
+        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+            continue;
+        }
+        for k in 0..3 {
+            *edges.entry((v[k], v[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    !edges.is_empty()
+        && edges
+            .iter()
+            .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+}

@@ -16,6 +16,7 @@ use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
+use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
 /// Radiance arriving along `ray`, whose ray cone is `cone` (texture level
@@ -32,12 +33,22 @@ pub fn trace(
     counters: &mut RenderCounters,
 ) -> Color {
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
-        return scene.escaped_radiance(ray.direction);
+        let l = scene.escaped_radiance(ray.direction);
+        return match scene.fog() {
+            Some(fog) => l * fog.transmittance(f32::INFINITY),
+            None => l,
+        };
     };
     let it = Interaction::with_cone(scene, ray, &hit, cone);
-    // A segment that ran through an absorbing interior carries its
-    // transmittance to everything seen at its end.
-    let interior = interior_transmittance(&it, hit.t * ray.direction.length());
+    // A segment that ran through an absorbing interior (or, in a scene
+    // with media, through any medium: Beer-Lambert by its extinction)
+    // carries its transmittance to everything seen at its end.
+    let distance = hit.t * ray.direction.length();
+    let interior = if scene.has_media() {
+        volume::whitted_transmittance(scene, Some(&hit), ray.direction, distance)
+    } else {
+        interior_transmittance(&it, distance)
+    };
     let throughput = interior.map_or(throughput, |tr| throughput * tr);
     let mut radiance = it.surface.emission;
     if it.is_lit_by_lights() && settings.style == Style::Gooch {
@@ -87,8 +98,28 @@ pub fn trace_path(
 }
 
 /// [`trace_path`] at wavelength `lambda` (spectral mode) or in RGB
-/// (`None`), without the film weight of the wavelength.
+/// (`None`), without the film weight of the wavelength: through media
+/// when the scene has them, else without a look at media.
 fn trace_path_at(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    cone: RayCone,
+    sampler: &mut Sampler,
+    lambda: Option<f32>,
+    counters: &mut RenderCounters,
+) -> Color {
+    if scene.has_media() {
+        trace_path_in::<true>(scene, settings, camera_ray, cone, sampler, lambda, counters)
+    } else {
+        trace_path_in::<false>(scene, settings, camera_ray, cone, sampler, lambda, counters)
+    }
+}
+
+/// The path loop; `MEDIA` follows each segment through the scene's media
+/// ([`volume::propagate`]) and gives shadow rays their transmittance.
+#[inline(always)]
+fn trace_path_in<const MEDIA: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
     camera_ray: &Ray,
@@ -104,14 +135,53 @@ fn trace_path_at(
     let mut prev_pdf = 0.0;
     let mut depth = 0;
     loop {
-        let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
-            radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
-            return radiance;
+        let found = scene.intersect(&ray, 0.0, f32::INFINITY);
+        let (hit, distance) = if MEDIA {
+            let seg = volume::propagate(scene, &ray, found, depth, throughput, sampler);
+            counters.rays.refraction += seg.rays.0;
+            counters.rays.shadow += seg.rays.1;
+            radiance += throughput * seg.radiance;
+            throughput *= seg.weight;
+            match seg.end {
+                SegmentEnd::Surface { hit, ray: at } => {
+                    ray = at;
+                    (hit, hit.t)
+                }
+                SegmentEnd::Escaped(d) => {
+                    radiance += throughput * path::escaped(scene, settings, d, prev_pdf);
+                    return radiance;
+                }
+                SegmentEnd::Lost => return radiance,
+                SegmentEnd::Scattered(v) => {
+                    volume::medium_next_event(scene, settings, &v, sampler, depth, |q| {
+                        counters.rays.shadow += 1;
+                        let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
+                        radiance += throughput * q.radiance * tr;
+                    });
+                    let Some(c) =
+                        volume::continue_in_medium(settings, &v, depth, throughput, sampler)
+                    else {
+                        return radiance;
+                    };
+                    counters.rays.reflection += 1;
+                    throughput = throughput * c.sample.weight * c.scale;
+                    ray = c.sample.ray;
+                    cone = RayCone::NONE;
+                    prev_pdf = c.sample.pdf;
+                    depth += 1;
+                    continue;
+                }
+            }
+        } else {
+            let Some(hit) = found else {
+                radiance += throughput * path::escaped(scene, settings, ray.direction, prev_pdf);
+                return radiance;
+            };
+            (hit, hit.t * ray.direction.length())
         };
         let mut it = Interaction::with_cone(scene, &ray, &hit, cone);
         path::at_wavelength(&mut it, lambda);
-        let distance = hit.t * ray.direction.length();
-        if let Some(tr) = interior_transmittance(&it, distance) {
+        if !MEDIA && let Some(tr) = interior_transmittance(&it, distance) {
             throughput *= tr;
         }
         radiance +=
@@ -119,7 +189,10 @@ fn trace_path_at(
         let lobes = LobeChoice::new(&it);
         path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
             counters.rays.shadow += 1;
-            if !scene.occluded(&q.ray, 0.0, q.t_max) {
+            if MEDIA {
+                let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
+                radiance += throughput * q.radiance * tr;
+            } else if !scene.occluded(&q.ray, 0.0, q.t_max) {
                 radiance += throughput * q.radiance;
             }
         });

@@ -144,6 +144,8 @@ pub struct SceneDesc {
     /// Light from infinitely far away (replaces `background` when
     /// present).
     pub environment: Option<crate::scene::environment::Environment>,
+    /// The medium filling the space outside every object (a global fog).
+    pub fog: Option<crate::core::medium::Medium>,
     /// Suggested settings.
     pub settings: SettingsDesc,
 }

@@ -15,6 +15,7 @@ use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
 use crate::core::math::Color;
+use crate::core::medium::Medium;
 use crate::core::optics;
 use crate::core::spectrum::{Dispersion, LAMBDA_D, Sellmeier};
 use crate::geometry::mesh::{BuildOptions, Mesh, MeshData, NormalMode};
@@ -43,6 +44,19 @@ struct FileScene {
     gltf: Vec<FileInclude>,
     environment: Option<FileEnvironment>,
     lightfield: Option<FileLightField>,
+    medium: Option<FileMedium>,
+}
+
+/// `[medium]`: the global fog, by physical parameters (`absorption`,
+/// `scattering`, `g`) or by the artist's (`albedo`, `mean_free_path`, `g`).
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FileMedium {
+    absorption: Option<FileColor>,
+    scattering: Option<FileColor>,
+    g: Option<f32>,
+    albedo: Option<FileColor>,
+    mean_free_path: Option<FileColor>,
 }
 
 /// `[lightfield]`: the capture rig of `prism lightfield capture`.
@@ -251,6 +265,21 @@ struct FileMaterial {
     sellmeier: Option<FileSellmeier>,
     /// Dispersion by an Abbe number (Cauchy's law through `ior`).
     abbe: Option<f32>,
+    /// Scattering coefficient of the interior (sigma_s, per unit length).
+    scattering: Option<FileColor>,
+    /// Henyey-Greenstein asymmetry of the interior's scattering.
+    g: Option<f32>,
+    /// Single-scattering albedo of the interior (the artist's form, with
+    /// `mean_free_path`).
+    albedo: Option<FileColor>,
+    /// Mean free path inside (per channel, scene units).
+    mean_free_path: Option<FileColor>,
+    /// Subsurface scattering: the colour a large slab of the material
+    /// shows (see the README's "Subsurface scattering"), with
+    /// `subsurface_radius`.
+    subsurface_color: Option<FileColor>,
+    /// Subsurface scattering: the mean free path per channel.
+    subsurface_radius: Option<FileColor>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -525,6 +554,44 @@ fn absorption(m: &FileMaterial) -> std::result::Result<Color, String> {
     }
 }
 
+/// A medium from its physical parameters (`absorption`, `scattering`,
+/// `g`) or its artist's parameters (`albedo` with `mean_free_path`, and
+/// `g`); `absorbing` is the absorption already read (a material may give
+/// it as an attenuation colour).
+fn medium_parameters(
+    absorbing: Option<Color>,
+    scattering: Option<FileColor>,
+    g: Option<f32>,
+    albedo: Option<FileColor>,
+    mean_free_path: Option<FileColor>,
+) -> std::result::Result<Medium, String> {
+    let g = g.unwrap_or(0.0);
+    match (albedo, mean_free_path) {
+        (None, None) => {
+            let sigma_a = absorbing.unwrap_or(Color::ZERO);
+            let sigma_s = scattering.map_or(Color::ZERO, |s| s.get());
+            // An infinite absorption (a black interior) is allowed; the
+            // scattering coefficient and g are checked like a medium's.
+            Medium::checked(Color::ZERO, sigma_s, g)?;
+            Ok(Medium {
+                sigma_a,
+                sigma_s,
+                g,
+            })
+        }
+        (Some(a), Some(l)) => {
+            if absorbing.is_some_and(|a| a != Color::ZERO) || scattering.is_some() {
+                return Err(
+                    "give either absorption/scattering or albedo with mean_free_path, not both"
+                        .into(),
+                );
+            }
+            Medium::from_albedo(a.get(), l.get(), g)
+        }
+        _ => Err("albedo and mean_free_path must be given together".into()),
+    }
+}
+
 fn unit_interval(what: &str, v: f32) -> std::result::Result<f32, String> {
     if (0.0..=1.0).contains(&v) {
         Ok(v)
@@ -560,6 +627,17 @@ impl Ctx<'_> {
         }
         if let Some(env) = &file.environment {
             scene.environment = Some(self.environment(env)?);
+        }
+        if let Some(m) = &file.medium {
+            let sigma_a = m
+                .absorption
+                .map(|a| optics::check_absorption(a.get()))
+                .transpose()
+                .map_err(|e| self.err(format!("medium: {e}")))?;
+            let fog = medium_parameters(sigma_a, m.scattering, m.g, m.albedo, m.mean_free_path)
+                .and_then(|f| Medium::checked(f.sigma_a, f.sigma_s, f.g))
+                .map_err(|e| self.err(format!("medium: {e}")))?;
+            scene.fog = (!fog.is_clear()).then_some(fog);
         }
         if let Some(c) = &file.camera {
             scene.cameras.push(self.camera(c).map_err(|m| self.err(m))?);
@@ -824,6 +902,45 @@ impl Ctx<'_> {
         }
         let (dispersion, ior) = dispersion(m)?;
         let ior = ior.unwrap_or(d.ior);
+        let sigma_a = absorption(m)?;
+        let (interior, subsurface) = match (m.subsurface_color, m.subsurface_radius) {
+            (None, None) => (
+                medium_parameters(Some(sigma_a), m.scattering, m.g, m.albedo, m.mean_free_path)?,
+                false,
+            ),
+            (Some(c), Some(r)) => {
+                if sigma_a != Color::ZERO
+                    || m.scattering.is_some()
+                    || m.albedo.is_some()
+                    || m.mean_free_path.is_some()
+                    || m.g.is_some()
+                {
+                    return Err("subsurface_color and subsurface_radius define the interior: give no absorption, attenuation, scattering, g, albedo or mean_free_path with them".into());
+                }
+                (Medium::subsurface(c.get(), r.get())?, true)
+            }
+            _ => {
+                return Err("subsurface_color and subsurface_radius must be given together".into());
+            }
+        };
+        // A subsurface material's surface is, unless told otherwise, an
+        // index-matched boundary (the colour is the medium's).
+        let d = if subsurface {
+            Material {
+                base_color: Color::ONE,
+                diffuse: 0.0,
+                transmission: 1.0,
+                ior: m.ior.unwrap_or(1.0),
+                ..d
+            }
+        } else {
+            d
+        };
+        let ior = if subsurface && m.ior.is_none() && dispersion.is_none() {
+            1.0
+        } else {
+            ior
+        };
         if !(ior.is_finite() && ior > 0.0) {
             return Err(format!("ior must be a positive finite number, got {ior}"));
         }
@@ -834,10 +951,12 @@ impl Ctx<'_> {
             specular: color(m.specular, d.specular, "specular")?,
             shininess,
             mirror: color(m.mirror, d.mirror, "mirror")?,
-            transmission: unit_interval("transmission", m.transmission.unwrap_or(0.0))?,
+            transmission: unit_interval("transmission", m.transmission.unwrap_or(d.transmission))?,
             ior,
             emission: color(m.emission, d.emission, "emission")?,
-            absorption: absorption(m)?,
+            absorption: interior.sigma_a,
+            scattering: interior.sigma_s,
+            phase_g: interior.g,
             dispersion,
             ..d
         })
@@ -966,6 +1085,12 @@ impl Ctx<'_> {
                 } else {
                     NormalMode::Flat
                 };
+                if material.has_scattering_interior() && !crate::geometry::mesh::is_closed(&data) {
+                    return Err(
+                        "holds a scattering medium but its mesh is not closed (every edge must join exactly two triangles)"
+                            .into(),
+                    );
+                }
                 let name = o.name.clone().unwrap_or_else(|| "mesh".into());
                 let mesh = Mesh::with_accel(
                     name,
@@ -983,6 +1108,14 @@ impl Ctx<'_> {
             }
         };
         shape.validate()?;
+        if material.has_scattering_interior()
+            && !matches!(shape, Shape::Sphere { .. } | Shape::Ellipsoid { .. })
+        {
+            return Err(format!(
+                "holds a scattering medium but a {} is not closed (only spheres, ellipsoids and closed meshes can hold one)",
+                shape.kind_name()
+            ));
+        }
         Ok(ObjectDesc {
             name: o.name.clone(),
             transform: self.placement(&o.placement)?,

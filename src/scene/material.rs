@@ -7,6 +7,7 @@
 //! At a hit the material is evaluated into a [`SurfaceSample`]: textures
 //! are looked up once and the shading kernels see plain colours.
 
+use crate::core::medium::Medium;
 use std::sync::Arc;
 
 use bevy_ecs::component::Component;
@@ -551,6 +552,14 @@ pub struct Material {
     /// its surface to leaving it, is attenuated by `exp(-sigma_a d)`
     /// (Beer-Lambert); see [`crate::transport::medium`].
     pub absorption: Color,
+    /// Scattering coefficient `sigma_s` of the object's interior, per
+    /// channel, in inverse scene units (zero: the interior only absorbs).
+    /// With it the interior is a participating medium that path transport
+    /// scatters in (see `transport::volume`); the object must be closed.
+    pub scattering: Color,
+    /// Henyey-Greenstein asymmetry `g` of the interior's scattering, in
+    /// `(-1, 1)`.
+    pub phase_g: f32,
     /// How the index of refraction depends on wavelength (`None`: it does
     /// not, `ior` holds for every wavelength). A scene with a dispersive
     /// material is path traced spectrally (see [`crate::core::spectrum`]);
@@ -603,6 +612,8 @@ impl Default for Material {
             transmission: 0.0,
             ior: 1.5,
             absorption: Color::ZERO,
+            scattering: Color::ZERO,
+            phase_g: 0.0,
             dispersion: None,
             emission: Color::ZERO,
             emission_texture: None,
@@ -780,6 +791,42 @@ impl Material {
             (false, false, true) => MaterialClass::Glass,
             _ => MaterialClass::General,
         }
+    }
+
+    /// The medium filling the object's interior: `None` when it is clear
+    /// (no absorption, no scattering).
+    #[inline]
+    pub fn interior(&self) -> Option<Medium> {
+        let m = Medium {
+            sigma_a: self.absorption,
+            sigma_s: self.scattering,
+            g: self.phase_g,
+        };
+        (!m.is_clear()).then_some(m)
+    }
+
+    /// True when the interior scatters light (a participating medium, not
+    /// only an absorber).
+    #[inline]
+    pub fn has_scattering_interior(&self) -> bool {
+        self.scattering.max_element() > 0.0
+    }
+
+    /// True when the surface is an index-matched boundary that path
+    /// transport crosses without a bounce: a smooth dielectric of index 1,
+    /// full transmission, white tint, nothing else (no other lobe, no
+    /// emission, no texture, no dispersion, no cut-out). It only marks
+    /// where a medium begins and ends.
+    #[inline]
+    pub fn is_interface(&self) -> bool {
+        self.class() == MaterialClass::Glass
+            && self.transmission == 1.0
+            && self.ior == 1.0
+            && self.base_color == Color::ONE
+            && self.base_color_texture.is_none()
+            && self.emission == Color::ZERO
+            && self.dispersion.is_none()
+            && self.alpha.is_none()
     }
 
     /// True when a lookup of the material depends on its texture level of

@@ -6,6 +6,7 @@ use std::time::Instant;
 use crate::accel::build::BuildQuality;
 use crate::accel::tlas::Tlas;
 use crate::core::math::Color;
+use crate::core::medium::Medium;
 use crate::scene::emitters::EmitterTable;
 use crate::scene::environment::Environment;
 use crate::scene::instance::{Instance, InstanceGeometry};
@@ -57,6 +58,14 @@ pub struct RenderScene {
     /// True when a material is dispersive ([`has_dispersion`]; kept up to
     /// date by the material updates): path transport is then spectral.
     pub(super) spectral: bool,
+    /// True when a material's interior scatters
+    /// ([`Material::has_scattering_interior`]; kept up to date by the
+    /// material updates): with it, or with a fog, path transport runs the
+    /// medium kernels (`transport::volume`).
+    pub(super) scattering: bool,
+    /// The medium that fills the space outside every object (a global
+    /// fog), if any.
+    pub(super) fog: Option<Medium>,
 }
 
 impl RenderScene {
@@ -99,6 +108,8 @@ impl RenderScene {
         Self {
             cutouts: has_cutouts(&materials),
             spectral: has_dispersion(&materials),
+            scattering: has_scattering(&materials),
+            fog: None,
             instances,
             materials,
             origin,
@@ -188,6 +199,26 @@ impl RenderScene {
         }
     }
 
+    /// The medium outside every object (global fog), if any.
+    #[inline]
+    pub fn fog(&self) -> Option<&Medium> {
+        self.fog.as_ref()
+    }
+
+    /// Sets or removes the global fog.
+    pub fn set_fog(&mut self, fog: Option<Medium>) {
+        self.fog = fog;
+    }
+
+    /// True when light transport must follow rays through participating
+    /// media: the scene has a fog or an object whose interior scatters.
+    /// Scenes whose media only absorb inside objects take the exact
+    /// Beer-Lambert path of `transport::medium` instead.
+    #[inline]
+    pub fn has_media(&self) -> bool {
+        self.scattering || self.fog.is_some()
+    }
+
     /// Sets or removes the environment.
     pub fn set_environment(&mut self, environment: Option<Environment>) {
         self.environment = environment;
@@ -216,6 +247,11 @@ impl RenderScene {
 /// transparency), which intersection queries must then honour.
 pub(super) fn has_cutouts(materials: &[Material]) -> bool {
     materials.iter().any(|m| m.alpha.is_some())
+}
+
+/// True when the interior of any of `materials` scatters.
+pub(super) fn has_scattering(materials: &[Material]) -> bool {
+    materials.iter().any(|m| m.has_scattering_interior())
 }
 
 /// True when any of `materials` is dispersive.

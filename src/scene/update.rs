@@ -7,7 +7,9 @@ use crate::scene::emitters::EmitterTable;
 use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
-use crate::scene::render_scene::{RenderScene, has_cutouts, has_dispersion, resolve_lights};
+use crate::scene::render_scene::{
+    RenderScene, has_cutouts, has_dispersion, has_scattering, resolve_lights,
+};
 use glam::DVec3;
 
 /// Incremental updates, for scenes that change from frame to frame.
@@ -75,6 +77,7 @@ impl RenderScene {
         self.emitters_stale = true;
         self.cutouts |= material.alpha.is_some();
         self.spectral |= material.dispersion.is_some();
+        self.scattering |= material.has_scattering_interior();
         self.materials.push(material);
         self.materials.len() as u32 - 1
     }
@@ -85,6 +88,7 @@ impl RenderScene {
         self.materials[index as usize] = material;
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
+        self.scattering = has_scattering(&self.materials);
     }
 
     /// Removes material `index` by moving the last material into its
@@ -108,6 +112,7 @@ impl RenderScene {
         let removed = self.materials.swap_remove(index as usize);
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
+        self.scattering = has_scattering(&self.materials);
         removed
     }
 

@@ -8,4 +8,5 @@ pub mod interaction;
 pub mod medium;
 pub mod path;
 pub mod photon;
+pub mod volume;
 pub mod whitted;

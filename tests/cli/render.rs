@@ -789,3 +789,86 @@ fn photon_options_reject_bad_input_cleanly() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// Bad medium parameters, on an object's interior and on the global fog:
+/// negative or NaN coefficients, |g| >= 1, half of the artist's pair, and
+/// an open surface holding a scattering medium. Each gives an error that
+/// names the object (or `medium`) and the parameter, exit status 1, no
+/// image.
+#[test]
+fn bad_media_fail_cleanly_naming_the_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out_file = d.join("a.png");
+    let camera = "[camera]\nlook_from = [0, 0, 5]\nlook_at = [0, 0, 0]\n";
+    let ball = |name: &str, shape: &str, interior: &str| {
+        format!(
+            "{camera}[[objects]]\nname = \"{name}\"\nshape = {shape}\nmaterial = {{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, {interior} }}\n"
+        )
+    };
+    let sphere = "{ type = \"sphere\", radius = 1.0 }";
+    // An open mesh: one triangle.
+    let open =
+        "{ type = \"mesh\", positions = [[0, 0, 0], [1, 0, 0], [0, 1, 0]], indices = [[0, 1, 2]] }";
+    for (i, (scene, words)) in [
+        (
+            ball("smoke", sphere, "scattering = [1, -1, 1]"),
+            &["smoke", "sigma_s", "non-negative"][..],
+        ),
+        (
+            ball("milk", sphere, "scattering = nan"),
+            &["milk", "sigma_s"][..],
+        ),
+        (
+            ball("haze", sphere, "scattering = 1, absorption = -0.5"),
+            &["haze", "sigma_a"][..],
+        ),
+        (
+            ball("cloud", sphere, "scattering = 1, g = 1.0"),
+            &["cloud", "g must lie strictly between -1 and 1"][..],
+        ),
+        (
+            ball("cloud2", sphere, "scattering = 1, g = -1.5"),
+            &["cloud2", "g must lie"][..],
+        ),
+        (
+            ball("wax", sphere, "albedo = 0.9"),
+            &["wax", "mean_free_path"][..],
+        ),
+        (
+            ball("jade", sphere, "albedo = 1.2, mean_free_path = 0.1"),
+            &["jade", "albedo"][..],
+        ),
+        (
+            ball("sheet", open, "scattering = 1"),
+            &["sheet", "not closed"][..],
+        ),
+        (
+            ball(
+                "disk",
+                "{ type = \"disk\", radius = 1.0 }",
+                "scattering = 1",
+            ),
+            &["disk", "not closed"][..],
+        ),
+        (
+            format!("{camera}[medium]\nscattering = -1\n"),
+            &["medium", "sigma_s"][..],
+        ),
+        (
+            format!("{camera}[medium]\nscattering = 1\ng = nan\n"),
+            &["medium", "g must lie"][..],
+        ),
+        (
+            format!("{camera}[medium]\nabsorption = inf\n"),
+            &["medium", "sigma_a"][..],
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let toml = d.join(format!("bad{i}.toml"));
+        std::fs::write(&toml, &scene).unwrap();
+        assert_clean_failure(&render(&toml, &out_file, &[]), &out_file, words);
+    }
+}

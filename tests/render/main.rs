@@ -13,6 +13,9 @@
 //!   path tracer (Cornell box) and bit for bit across thread counts;
 //! * `cargo test --test render media::` — absorbing interiors (Beer-Lambert)
 //!   from TOML and glTF `KHR_materials_volume` in every transport;
+//! * `cargo test --test render scattering::` — scattering media and
+//!   subsurface scattering: a furnace, Chandrasekhar's semi-infinite slab,
+//!   subsurface slabs and balls, thread and integrator determinism;
 //! * `cargo test --test render radiosity::` — radiosity transport: the
 //!   Cornell box against the path tracer, the solution reused while the
 //!   camera moves, thread-count independence, refused input;
@@ -59,6 +62,7 @@ mod photon;
 mod radiosity;
 mod references;
 mod robustness;
+mod scattering;
 mod scene_updates;
 mod shards;
 mod texture_lod;

@@ -177,6 +177,7 @@ fn stepping_world(scene_toml: &str, s: RenderSettings) -> Renderer {
         classes,
         features,
         shadows,
+        media: false,
     });
     r
 }

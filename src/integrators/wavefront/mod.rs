@@ -109,6 +109,9 @@ stages! {
     /// Closest-hit traversal and routing of rays to queues (once per
     /// bounce).
     IntersectClosest = "intersect_closest",
+    /// Following rays through participating media (path transport, scenes
+    /// with media only).
+    SampleMedia = "sample_media",
     /// Adding the background for escaped rays.
     HandleEscapedRays = "handle_escaped_rays",
     /// Shading of emissive-only materials.
@@ -277,7 +280,7 @@ mod tests {
         runs.record(Stage::ShadeDiffuse);
         assert_eq!(
             serde_json::to_string(&runs).unwrap(),
-            r#"{"generate_camera_rays":1,"intersect_closest":0,"handle_escaped_rays":0,"shade_emissive":0,"shade_diffuse":2,"shade_mirror":0,"shade_glass":0,"shade_general":0,"trace_shadow_rays":0,"update_film":0}"#
+            r#"{"generate_camera_rays":1,"intersect_closest":0,"sample_media":0,"handle_escaped_rays":0,"shade_emissive":0,"shade_diffuse":2,"shade_mirror":0,"shade_glass":0,"shade_general":0,"trace_shadow_rays":0,"update_film":0}"#
         );
         assert_eq!(runs.names_run(), ["generate_camera_rays", "shade_diffuse"]);
         let mut seconds = StageSeconds::default();
@@ -286,7 +289,7 @@ mod tests {
         seconds.add(Stage::ShadeGlass, 0.5);
         assert_eq!(
             serde_json::to_string(&seconds).unwrap(),
-            r#"{"generate_camera_rays":0.0,"intersect_closest":0.5,"handle_escaped_rays":0.0,"shade":0.75,"trace_shadow_rays":0.0,"update_film":0.0}"#
+            r#"{"generate_camera_rays":0.0,"intersect_closest":0.5,"sample_media":0.0,"handle_escaped_rays":0.0,"shade":0.75,"trace_shadow_rays":0.0,"update_film":0.0}"#
         );
         assert_eq!(seconds.total(), 1.25);
     }

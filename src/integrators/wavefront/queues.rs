@@ -94,7 +94,7 @@ pub struct RayQueue {
 
 impl RayQueue {
     /// Appends a ray.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: RayItem) {
         debug_assert!(
             item.ray.origin.is_finite() && item.ray.direction.is_finite(),
@@ -247,7 +247,7 @@ pub struct HitQueue {
 
 impl HitQueue {
     /// Appends a hit.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: HitItem) {
         debug_assert!(
             item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
@@ -333,7 +333,7 @@ pub struct EscapedQueue {
 impl EscapedQueue {
     /// Appends an escaped ray of a scene without an environment (it
     /// brings back the constant background).
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, path: u32, throughput: Color) {
         debug_assert!(throughput.is_finite());
         self.throughput.push(throughput);
@@ -342,7 +342,7 @@ impl EscapedQueue {
 
     /// Appends an escaped ray with the direction and density the
     /// environment is looked up and weighted with.
-    #[inline]
+    #[inline(always)]
     pub fn push_toward(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
         self.push(path, throughput);
         self.direction.push(direction);
@@ -356,6 +356,54 @@ soa_queue!(
     path,
     [throughput, path, direction, pdf]
 );
+
+/// Rays of a scene with participating media after their closest-hit
+/// test, waiting to be followed through the media (path transport): the
+/// ray and what it hit, if anything.
+#[derive(Clone, Debug, Default)]
+pub struct MediumQueue {
+    /// The rays.
+    pub rays: RayQueue,
+    /// Their closest hits (`None`: escaped).
+    pub hits: Vec<Option<Hit>>,
+}
+
+impl MediumQueue {
+    /// Appends a ray and its closest hit.
+    #[inline]
+    pub fn push(&mut self, ray: RayItem, hit: Option<Hit>) {
+        self.rays.push(ray);
+        self.hits.push(hit);
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.hits.len()
+    }
+
+    /// True when no ray is queued.
+    pub fn is_empty(&self) -> bool {
+        self.hits.is_empty()
+    }
+
+    /// Removes every ray, keeping the buffers.
+    pub fn clear(&mut self) {
+        self.rays.clear();
+        self.hits.clear();
+    }
+
+    /// Appends every ray of `other`, in order.
+    pub fn append(&mut self, other: &MediumQueue) {
+        self.rays.append(&other.rays);
+        self.hits.extend_from_slice(&other.hits);
+    }
+}
+
+impl QueueBytes for MediumQueue {
+    fn bytes(&self) -> usize {
+        self.rays.bytes() + vec_bytes(&self.hits)
+    }
+}
 
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -387,7 +435,7 @@ pub struct ShadowQueue {
 
 impl ShadowQueue {
     /// Appends a shadow ray.
-    #[inline]
+    #[inline(always)]
     pub fn push(&mut self, item: ShadowItem) {
         debug_assert!(
             item.ray.origin.is_finite() && item.ray.direction.is_finite(),

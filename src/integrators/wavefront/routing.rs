@@ -20,8 +20,8 @@
 use crate::core::math::Color;
 use crate::integrators::counters::RayCounts;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
-    ShadowSegments,
+    EscapedQueue, HitItem, HitQueue, MediumQueue, QueueBytes, RayItem, RayQueue, ShadowItem,
+    ShadowQueue, ShadowSegments,
 };
 use crate::scene::Hit;
 use crate::scene::material::MaterialClass;
@@ -43,6 +43,7 @@ struct ClassQueues([HitQueue; MaterialClass::ALL.len()]);
 pub struct RoutedChunk {
     escaped: EscapedQueue,
     hits: ClassQueues,
+    media: MediumQueue,
 }
 
 impl RoutedChunk {
@@ -52,6 +53,7 @@ impl RoutedChunk {
         for q in &mut self.hits.0 {
             q.clear();
         }
+        self.media.clear();
     }
 
     /// Routes ray `i` of `rays` after its closest-hit test: a miss to the
@@ -83,9 +85,45 @@ impl RoutedChunk {
         }
     }
 
+    /// Routes ray `i` of `rays` of a scene with media under path
+    /// transport: every ray, hit or not, goes to the medium queue, to be
+    /// followed through the media before anything else.
+    #[inline]
+    pub fn route_to_media(&mut self, rays: &RayQueue, i: usize, found: Option<Hit>) {
+        self.media.push(rays.get(i), found);
+    }
+
+    /// Routes what a ray of a scene with media ended on after it was
+    /// followed through the media: `hit` (with `hit.t` the whole segment's
+    /// length) of a ray in direction `item.ray.direction` to the queue of
+    /// its material's class, or an escape in that direction to the escaped
+    /// queue (with direction and density when `environment`).
+    #[inline]
+    pub fn route_after_media(
+        &mut self,
+        classes: &[MaterialClass],
+        environment: bool,
+        item: &RayItem,
+        hit: Option<Hit>,
+    ) {
+        match hit {
+            None if environment => {
+                self.escaped
+                    .push_toward(item.path, item.throughput, item.ray.direction, item.pdf)
+            }
+            None => self.escaped.push(item.path, item.throughput),
+            Some(h) => {
+                let class = classes[h.material as usize];
+                self.hits.0[class as usize].push(HitItem::new(&h, item));
+            }
+        }
+    }
+
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.escaped.bytes() + self.hits.0.iter().map(|q| q.bytes()).sum::<usize>()
+        self.escaped.bytes()
+            + self.hits.0.iter().map(|q| q.bytes()).sum::<usize>()
+            + self.media.bytes()
     }
 }
 
@@ -95,11 +133,15 @@ pub fn join_routed<'a>(
     chunks: impl IntoIterator<Item = &'a RoutedChunk>,
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
+    media: &mut MediumQueue,
 ) {
     for chunk in chunks {
         escaped.append(&chunk.escaped);
         for class in MaterialClass::ALL {
             hits.queue_mut(class).append(&chunk.hits.0[class as usize]);
+        }
+        if !chunk.media.is_empty() {
+            media.append(&chunk.media);
         }
     }
 }
@@ -141,6 +183,27 @@ impl ShadeOutput {
             radiance: h.throughput * q.radiance,
             path: h.path,
         });
+    }
+
+    /// Queues the shadow ray of `q` for path `path` reached with
+    /// `throughput` (a scattering event in a medium) and counts it.
+    #[inline]
+    pub fn push_shadow_from(&mut self, path: u32, throughput: Color, q: ShadowQuery) {
+        self.counts.shadow += 1;
+        self.shadows.push(ShadowItem {
+            ray: q.ray,
+            t_max: q.t_max,
+            radiance: throughput * q.radiance,
+            path,
+        });
+    }
+
+    /// Adds `n` rays traced inside a stage (boundary crossings, as
+    /// refraction rays; shadow rays of point lights in media).
+    #[inline]
+    pub fn count_rays(&mut self, crossings: u64, shadows: u64) {
+        self.counts.refraction += crossings;
+        self.counts.shadow += shadows;
     }
 
     /// Queues a reflection or refraction ray for the next bounce and
@@ -192,8 +255,12 @@ pub struct ShadeTargets<'a> {
 /// paths' radiance, shadow segments handed over, then every chunk's
 /// reflection rays before every chunk's refraction rays (so neighbouring
 /// rays of the next bounce are alike).
-pub fn join_shade_outputs(outputs: &mut [ShadeOutput], to: ShadeTargets<'_>) {
+pub fn join_shade_outputs<T: std::borrow::BorrowMut<ShadeOutput>>(
+    outputs: &mut [T],
+    to: ShadeTargets<'_>,
+) {
     for out in outputs.iter_mut() {
+        let out = out.borrow_mut();
         for &(path, l) in &out.emitted {
             to.radiance[path as usize] += l;
         }
@@ -202,6 +269,6 @@ pub fn join_shade_outputs(outputs: &mut [ShadeOutput], to: ShadeTargets<'_>) {
         to.rays.add(&out.counts);
     }
     for out in outputs.iter() {
-        to.next.append(&out.refractions);
+        to.next.append(&out.borrow().refractions);
     }
 }

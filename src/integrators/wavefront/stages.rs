@@ -6,8 +6,10 @@
 //! with [`drain`](crate::integrators::wavefront::drain) and leave where
 //! each result goes to [`routing`](crate::integrators::wavefront::routing).
 
+use glam::Vec3A;
+
 use crate::accel::packet::LANES;
-use crate::core::math::{Color, Ray, max_component};
+use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
@@ -15,7 +17,7 @@ use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
 use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
+    EscapedQueue, HitItem, HitQueue, MediumQueue, RayItem, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{
     ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
@@ -28,6 +30,7 @@ use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
+use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
 /// Stage: one camera ray per path of the batch `[first, first + count)`.
@@ -84,6 +87,10 @@ pub type RoutingScratch = Vec<IntersectChunk>;
 /// Stage: closest hit for every ray of `rays`, routed to `escaped` or to
 /// the hit queue of the material's class. Chunks are traced and routed in
 /// parallel into `scratch`, then appended in chunk order.
+///
+/// With `to_media` (a scene with media under path transport) every ray
+/// goes to `media` instead, to be followed through the media by
+/// [`sample_media`] first.
 pub fn intersect_closest(
     scene: &RenderScene,
     classes: &[MaterialClass],
@@ -91,6 +98,7 @@ pub fn intersect_closest(
     scratch: &mut RoutingScratch,
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
+    (to_media, media): (bool, &mut MediumQueue),
 ) {
     // Eight neighbouring rays pointing into one octant go through the top
     // level and the meshes as one packet: coherent rays (camera rays,
@@ -117,10 +125,14 @@ pub fn intersect_closest(
                     }
                 }
             }
-            routed.route(classes, environment, rays, i, found[lane]);
+            if to_media {
+                routed.route_to_media(rays, i, found[lane]);
+            } else {
+                routed.route(classes, environment, rays, i, found[lane]);
+            }
         }
     });
-    join_routed(chunks.iter().map(|c| &c.routed), escaped, hits);
+    join_routed(chunks.iter().map(|c| &c.routed), escaped, hits, media);
 }
 
 /// Whether all `rays` point into one octant: the packets worth tracing
@@ -136,6 +148,150 @@ fn one_octant(rays: &[Ray]) -> bool {
     rays.iter().all(|r| octant(r) == first)
 }
 
+/// One chunk's buffers of [`sample_media`].
+#[derive(Debug, Default)]
+pub struct MediaChunk {
+    routed: RoutedChunk,
+    shaded: ShadeOutput,
+}
+
+impl std::borrow::Borrow<ShadeOutput> for MediaChunk {
+    fn borrow(&self) -> &ShadeOutput {
+        &self.shaded
+    }
+}
+
+impl std::borrow::BorrowMut<ShadeOutput> for MediaChunk {
+    fn borrow_mut(&mut self) -> &mut ShadeOutput {
+        &mut self.shaded
+    }
+}
+
+impl MediaChunk {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.routed.bytes() + self.shaded.bytes()
+    }
+}
+
+/// Per-chunk buffers of [`sample_media`], kept between calls.
+pub type MediaScratch = Vec<MediaChunk>;
+
+/// Where [`sample_media`] sends what it produces: the surfaces and
+/// escapes at the segments' ends, and the light, shadow rays and next rays
+/// of scattering events.
+pub struct MediaTargets<'a> {
+    /// Rays that left the scene.
+    pub escaped: &'a mut EscapedQueue,
+    /// Hits, by material class.
+    pub hits: &'a mut dyn ClassHitQueues,
+    /// Light, shadow rays, next rays and counts.
+    pub shade: ShadeTargets<'a>,
+}
+
+impl ClassHitQueues for &mut dyn ClassHitQueues {
+    fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue {
+        (**self).queue_mut(class)
+    }
+}
+
+/// Stage (path transport in a scene with media): follows every ray of
+/// `media` through the media with [`volume::propagate`], as the
+/// recursive tracer does. A segment that ends on a surface goes to its
+/// class's hit queue (weighted), an escape to the escaped queue; a
+/// scattering event adds its next-event shadow rays
+/// ([`volume::medium_next_event`]) and its next ray
+/// ([`volume::continue_in_medium`]). `first` is the batch's first path.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_media(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    paths: &PathMap,
+    first: u64,
+    classes: &[MaterialClass],
+    media: &MediumQueue,
+    scratch: &mut MediaScratch,
+    to: MediaTargets<'_>,
+) {
+    let environment = scene.environment().is_some();
+    let chunks = drain_queue(media.len(), scratch, |range, chunk| {
+        let MediaChunk { routed, shaded } = chunk;
+        routed.clear();
+        shaded.clear();
+        for i in range {
+            let item = media.rays.get(i);
+            let (pixel, sample) = paths.sampler_keys(first + item.path as u64);
+            let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
+            let seg = volume::propagate(
+                scene,
+                &item.ray,
+                media.hits[i],
+                item.depth,
+                item.throughput,
+                &mut sampler,
+            );
+            shaded.count_rays(seg.rays.0, seg.rays.1);
+            if seg.radiance != Color::ZERO {
+                shaded.emit(item.path, item.throughput * seg.radiance);
+            }
+            let throughput = item.throughput * seg.weight;
+            match seg.end {
+                SegmentEnd::Surface { hit, ray } => {
+                    let at = RayItem {
+                        ray,
+                        throughput,
+                        ..item
+                    };
+                    routed.route_after_media(classes, environment, &at, Some(hit));
+                }
+                SegmentEnd::Escaped(d) => {
+                    let at = RayItem {
+                        ray: Ray::new(item.ray.origin, d),
+                        throughput,
+                        ..item
+                    };
+                    routed.route_after_media(classes, environment, &at, None);
+                }
+                SegmentEnd::Lost => {}
+                SegmentEnd::Scattered(v) => {
+                    volume::medium_next_event(scene, settings, &v, &mut sampler, item.depth, |q| {
+                        shaded.push_shadow_from(item.path, throughput, q)
+                    });
+                    if let Some(c) = volume::continue_in_medium(
+                        settings,
+                        &v,
+                        item.depth,
+                        throughput,
+                        &mut sampler,
+                    ) {
+                        let next = RayItem {
+                            ray: c.sample.ray,
+                            throughput: throughput * c.sample.weight * c.scale,
+                            path: item.path,
+                            depth: item.depth + 1,
+                            pdf: c.sample.pdf,
+                            cone: RayCone::NONE,
+                        };
+                        shaded.push_secondary(c.sample.kind, next);
+                    }
+                }
+            }
+        }
+    });
+    let MediaTargets {
+        escaped,
+        mut hits,
+        shade,
+    } = to;
+    join_routed(
+        chunks.iter().map(|c| &c.routed),
+        escaped,
+        &mut hits,
+        &mut MediumQueue::default(),
+    );
+    join_shade_outputs(chunks, shade);
+}
+
 /// Stage: escaped rays bring back the background, or the environment
 /// (weighted against its next-event samples under path transport, as
 /// [`path::escaped`] weighs it).
@@ -145,6 +301,19 @@ pub fn handle_escaped_rays(
     escaped: &EscapedQueue,
     radiance: &mut [Color],
 ) {
+    // Under Whitted transport a fog attenuates escaped rays by its
+    // transmittance to infinity (path transport weighs them in
+    // `sample_media`).
+    if settings.transport != Transport::Path
+        && let Some(fog) = scene.fog()
+    {
+        let tr = fog.transmittance(f32::INFINITY);
+        for i in 0..escaped.len() {
+            let l = scene.escaped_radiance(escaped.direction.get(i).copied().unwrap_or(Vec3A::Z));
+            radiance[escaped.path[i] as usize] += escaped.throughput[i] * (l * tr);
+        }
+        return;
+    }
     if scene.environment().is_none() {
         let background = scene.background();
         for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
@@ -166,6 +335,7 @@ pub type ShadeScratch = Vec<ShadeOutput>;
 /// chunk order.
 fn shade_hits(
     scene: &RenderScene,
+    settings: &RenderSettings,
     hits: &HitQueue,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
@@ -178,14 +348,39 @@ fn shade_hits(
             let it =
                 Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             // A segment that ran through an absorbing interior carries its
-            // transmittance to everything seen at its end.
-            if let Some(tr) = interior_transmittance(&it, h.distance) {
+            // transmittance to everything seen at its end. In a scene with
+            // media, path transport has weighed the segment in
+            // `sample_media`, and Whitted transport attenuates it by its
+            // medium's extinction.
+            let tr = if scene.has_media() {
+                whitted_media_transmittance(scene, settings, &h)
+            } else {
+                interior_transmittance(&it, h.distance)
+            };
+            if let Some(tr) = tr {
                 h.throughput *= tr;
             }
             kernel(&h, &it, out);
         }
     });
     join_shade_outputs(outputs, to);
+}
+
+/// The attenuation of hit `h`'s segment in a scene with media: by its
+/// medium's extinction under Whitted transport, none under path transport
+/// (`sample_media` has weighed it). Out of line: scenes without media
+/// never call it.
+#[cold]
+#[inline(never)]
+fn whitted_media_transmittance(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    h: &HitItem,
+) -> Option<Color> {
+    if settings.transport == Transport::Path {
+        return None;
+    }
+    volume::whitted_transmittance(scene, Some(&h.hit()), h.direction, h.distance)
 }
 
 /// Stage, Whitted transport: shades every hit of one material class.
@@ -205,7 +400,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, settings, hits, scratch, to, |h, it, out| {
         if it.surface.emission != Color::ZERO {
             out.emit(h.path, h.throughput * it.surface.emission);
         }
@@ -255,7 +450,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, settings, hits, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
             out.emit(h.path, h.throughput * e);
@@ -338,6 +533,8 @@ pub struct ShadowScratch {
     work: Vec<(usize, std::ops::Range<usize>)>,
     /// Each work chunk's visibility flags.
     visible: Vec<Vec<bool>>,
+    /// Each work chunk's transmittances (scenes with media).
+    transmitted: Vec<Vec<Color>>,
 }
 
 impl ShadowScratch {
@@ -345,6 +542,11 @@ impl ShadowScratch {
     pub fn bytes(&self) -> usize {
         self.work.capacity() * std::mem::size_of::<(usize, std::ops::Range<usize>)>()
             + self.visible.iter().map(|v| v.capacity()).sum::<usize>()
+            + self
+                .transmitted
+                .iter()
+                .map(|v| v.capacity() * std::mem::size_of::<Color>())
+                .sum::<usize>()
     }
 }
 
@@ -356,13 +558,23 @@ impl ShadowScratch {
 /// meshes alone: whole packets, also with rays binned by light, were
 /// measured slower than single rays, because the single-ray node test is
 /// SIMD across a node's eight children already.
+///
+/// In a scene with media under path transport (`through_media`) each
+/// shadow ray is followed one at a time through the media and boundaries
+/// it crosses, and carries its transmittance
+/// ([`volume::shadow_transmittance`]).
 pub fn trace_shadow_rays(
     scene: &RenderScene,
     shadows: &ShadowSegments,
     scratch: &mut ShadowScratch,
     radiance: &mut [Color],
+    through_media: bool,
 ) {
-    let ShadowScratch { work, visible } = scratch;
+    if through_media {
+        trace_shadow_rays_through_media(scene, shadows, scratch, radiance);
+        return;
+    }
+    let ShadowScratch { work, visible, .. } = scratch;
     // Work chunks of at most CHUNK rays, each within one segment.
     work.clear();
     for (s, seg) in shadows.segments().iter().enumerate() {
@@ -395,6 +607,42 @@ pub fn trace_shadow_rays(
         for ((&path, l), &visible) in rays.zip(flags) {
             if visible {
                 radiance[path as usize] += *l;
+            }
+        }
+    }
+}
+
+/// [`trace_shadow_rays`] in a scene with media: each ray's transmittance,
+/// computed in parallel chunks, added to its path in queue order.
+fn trace_shadow_rays_through_media(
+    scene: &RenderScene,
+    shadows: &ShadowSegments,
+    scratch: &mut ShadowScratch,
+    radiance: &mut [Color],
+) {
+    let ShadowScratch {
+        work, transmitted, ..
+    } = scratch;
+    work.clear();
+    for (s, seg) in shadows.segments().iter().enumerate() {
+        work.extend(chunk_ranges(seg.len()).map(|range| (s, range)));
+    }
+    let work = &*work;
+    let out = drain_chunks(work.len(), transmitted, |c, out| {
+        let (s, range) = &work[c];
+        let seg = &shadows.segments()[*s];
+        out.clear();
+        out.extend(
+            range
+                .clone()
+                .map(|j| volume::shadow_transmittance(scene, &seg.ray(j), seg.t_max[j])),
+        );
+    });
+    for ((s, range), tr) in work.iter().zip(out.iter()) {
+        let seg = &shadows.segments()[*s];
+        for (j, &t) in range.clone().zip(tr) {
+            if t != Color::ZERO {
+                radiance[seg.path[j] as usize] += seg.radiance[j] * t;
             }
         }
     }

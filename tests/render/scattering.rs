@@ -1,0 +1,323 @@
+//! Scattering media under path transport: a furnace test, Chandrasekhar's
+//! semi-infinite slab, and determinism across threads and integrators.
+//!
+//! Every test renders with both integrators where it says so; statistical
+//! tolerances come from the standard error estimated from the pixels
+//! themselves (all pixels of these scenes have the same expectation, so
+//! their spread is the per-pixel noise).
+
+use prism::core::settings::{RenderSettings, Transport};
+use prism::image::film::Film;
+use prism::integrators::IntegratorKind;
+
+use crate::common::images::film_bits;
+use crate::common::render::{config, render_toml};
+
+/// Mean and standard error of the mean of every channel of every pixel
+/// of `film` (the pixels being independent estimates of one value).
+fn mean_and_error(film: &Film) -> (f64, f64) {
+    let v: Vec<f64> = film
+        .pixels
+        .iter()
+        .flat_map(|p| [p.x as f64, p.y as f64, p.z as f64])
+        .collect();
+    // The three channels of a pixel are one estimate (grey scenes): use
+    // one value per pixel for the error.
+    let per_pixel: Vec<f64> = v.chunks(3).map(|c| c.iter().sum::<f64>() / 3.0).collect();
+    let n = per_pixel.len() as f64;
+    let mean = per_pixel.iter().sum::<f64>() / n;
+    let var = per_pixel.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+fn path_settings(width: u32, height: u32, spp: u32, max_depth: u32) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        spp,
+        max_depth,
+        transport: Transport::Path,
+        ..Default::default()
+    }
+}
+
+/// An index-matched sphere (radius 1) that only scatters, with
+/// Henyey-Greenstein asymmetry `g`, in a uniform white environment,
+/// filling the view.
+fn furnace(g: f32) -> String {
+    format!(
+        r#"
+[camera]
+look_from = [0, 0, 3]
+look_at = [0, 0, 0]
+vfov = 30
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1.0 }}
+material = {{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = 2.0, g = {g} }}
+"#
+    )
+}
+
+/// Furnace: a purely scattering, index-matched sphere (albedo 1) in a
+/// white environment of radiance 1 renders 1 on every pixel, for
+/// backward, isotropic and forward scattering, in both integrators: the
+/// mean over the image within 4 standard errors of 1, and every pixel
+/// within 5 of its own standard deviations (the pixels' spread).
+#[test]
+fn a_scattering_sphere_in_a_white_furnace_disappears() {
+    for g in [-0.5f32, 0.0, 0.8] {
+        for kind in IntegratorKind::ALL {
+            let film = render_toml(&furnace(g), config(path_settings(12, 12, 16, 256), kind))
+                .film
+                .unwrap();
+            let (mean, se) = mean_and_error(&film);
+            let sd = se * (film.pixels.len() as f64).sqrt();
+            assert!(sd > 0.0, "g {g} {kind:?}: no noise at all?");
+            assert!(
+                (mean - 1.0).abs() < 4.0 * se,
+                "g {g} {kind:?}: mean {mean}, standard error {se}"
+            );
+            for (i, p) in film.pixels.iter().enumerate() {
+                let err = (*p - glam::Vec3::ONE).abs().max_element() as f64;
+                assert!(err < 5.0 * sd, "g {g} {kind:?}: pixel {i} is {p} (sd {sd})");
+            }
+        }
+    }
+}
+
+/// A sphere of radius 1000 (the semi-infinite slab: 1000 mean free
+/// paths deep, flat to 0.05 mean free paths within 10 of the axis) of an
+/// isotropic medium with extinction 1 and single-scattering albedo
+/// `omega`, index-matched, under a uniform white sky, seen straight down
+/// by an orthographic camera.
+fn chandrasekhar(omega: f32) -> String {
+    format!(
+        r#"
+[camera]
+look_from = [0, 1005, 0]
+look_at = [0, 0, 0]
+up = [0, 0, -1]
+ortho_half_height = 0.5
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1000.0 }}
+material = {{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = {omega}, absorption = {} }}
+"#,
+        1.0 - omega
+    )
+}
+
+/// Chandrasekhar's H-function results for a semi-infinite isotropic
+/// medium under uniform illumination of radiance 1, seen along the
+/// normal: the reflected radiance is `1 - H(1) sqrt(1 - omega)`, which is
+/// 0.285255, 0.414947 and 0.752721 for omega 0.8, 0.9 and 0.99. Both
+/// integrators within 1%; the test first checks that its standard error
+/// is below a third of that, so that 1% is a 3-sigma band at least.
+#[test]
+fn a_semi_infinite_slab_reflects_chandrasekhars_radiance() {
+    for (omega, expected) in [(0.8f32, 0.285255f64), (0.9, 0.414947), (0.99, 0.752721)] {
+        for kind in IntegratorKind::ALL {
+            let film = render_toml(
+                &chandrasekhar(omega),
+                config(path_settings(32, 32, 64, 1024), kind),
+            )
+            .film
+            .unwrap();
+            let (mean, se) = mean_and_error(&film);
+            let tol = 0.01 * expected;
+            assert!(
+                se < tol / 3.0,
+                "omega {omega} {kind:?}: standard error {se} too large for a 1% test"
+            );
+            assert!(
+                (mean - expected).abs() < tol,
+                "omega {omega} {kind:?}: {mean} (se {se}) vs {expected}"
+            );
+        }
+    }
+}
+
+/// A small foggy room: fog everywhere, a spot light and a point light in
+/// it, a scattering ball behind an index-matched boundary, a glass ball,
+/// an emissive panel and a floor.
+const FOGGY: &str = r#"
+[camera]
+look_from = [0, 1.5, 6]
+look_at = [0, 0.8, 0]
+vfov = 45
+[medium]
+scattering = 0.08
+absorption = 0.02
+g = 0.3
+[[objects]]
+shape = { type = "plane" }
+material = { color = 0.6 }
+[[objects]]
+shape = { type = "sphere", radius = 0.7 }
+translate = [-1, 0.7, 0]
+material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = [3, 4, 5], absorption = 0.2, g = -0.2 }
+[[objects]]
+shape = { type = "sphere", radius = 0.5 }
+translate = [1.1, 0.5, 0.5]
+material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.5 }
+[[objects]]
+shape = { type = "polygon", vertices = [[-0.5, 3, -0.5], [0.5, 3, -0.5], [0.5, 3, 0.5], [-0.5, 3, 0.5]] }
+material = { color = 0.0, emission = 4 }
+[[lights]]
+type = "spot"
+position = [2, 3, 1]
+direction = [-2, -3, -1]
+intensity = 20
+inner_angle = 10
+outer_angle = 20
+[[lights]]
+type = "point"
+position = [-2, 2, 2]
+intensity = 5
+"#;
+
+fn foggy(kind: IntegratorKind, threads: usize) -> Film {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        render_toml(FOGGY, config(path_settings(24, 18, 4, 12), kind))
+            .film
+            .unwrap()
+    })
+}
+
+/// Media images are bit-identical on 1 and 2 threads in each integrator,
+/// and the integrators agree to 1e-4 (relative to the pixel, absolute
+/// below 1).
+#[test]
+fn media_images_are_bit_identical_across_threads_and_integrators_agree() {
+    let rec = foggy(IntegratorKind::Recursive, 1);
+    let wav = foggy(IntegratorKind::Wavefront, 1);
+    assert_eq!(
+        film_bits(&rec),
+        film_bits(&foggy(IntegratorKind::Recursive, 2))
+    );
+    assert_eq!(
+        film_bits(&wav),
+        film_bits(&foggy(IntegratorKind::Wavefront, 2))
+    );
+    for (i, (a, b)) in rec.pixels.iter().zip(&wav.pixels).enumerate() {
+        let d = (*a - *b).abs().max_element();
+        assert!(
+            d <= 1e-4 * a.abs().max_element().max(1.0),
+            "pixel {i}: recursive {a} wavefront {b}"
+        );
+        assert!(a.is_finite());
+    }
+    // The fog is lit: no pixel is black (every camera ray scatters light
+    // of the lights back before it reaches anything).
+    assert!(rec.pixels.iter().all(|p| p.max_element() > 0.0));
+}
+
+/// Per-channel mean and standard error of the mean over the pixels.
+fn channel_stats(film: &Film) -> [(f64, f64); 3] {
+    let n = film.pixels.len() as f64;
+    std::array::from_fn(|c| {
+        let v: Vec<f64> = film.pixels.iter().map(|p| p[c] as f64).collect();
+        let mean = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        (mean, (var / n).sqrt())
+    })
+}
+
+/// The Chandrasekhar rig (an index-matched sphere of radius 1000 seen
+/// straight down under a white sky) with the subsurface material `material`.
+fn subsurface_slab(material: &str) -> String {
+    format!(
+        r#"
+[camera]
+look_from = [0, 1005, 0]
+look_at = [0, 0, 0]
+up = [0, 0, -1]
+ortho_half_height = 0.5
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1000.0 }}
+material = {material}
+"#
+    )
+}
+
+/// Subsurface scattering: a large slab of the material sends back its
+/// `subsurface_color` along the normal under a uniform white sky, every
+/// channel within 2% (after checking that the standard error is below a
+/// third of that), in both integrators.
+#[test]
+fn a_large_subsurface_slab_reflects_its_colour() {
+    let colour = [0.8f64, 0.5, 0.2];
+    let scene = subsurface_slab(
+        "{ subsurface_color = [0.8, 0.5, 0.2], subsurface_radius = [1.0, 0.5, 0.25] }",
+    );
+    for kind in IntegratorKind::ALL {
+        let film = render_toml(&scene, config(path_settings(32, 32, 64, 1024), kind))
+            .film
+            .unwrap();
+        for (c, (mean, se)) in channel_stats(&film).into_iter().enumerate() {
+            let tol = 0.02 * colour[c];
+            assert!(se < tol / 3.0, "{kind:?} channel {c}: standard error {se}");
+            assert!(
+                (mean - colour[c]).abs() < tol,
+                "{kind:?} channel {c}: {mean} (se {se}) vs {}",
+                colour[c]
+            );
+        }
+    }
+}
+
+/// A subsurface ball whose radius (mean free path) is small against its
+/// size looks, seen along the normal under a uniform white sky, like a
+/// Lambertian ball of the same colour (radiance = albedo): the centre of
+/// each within 4 combined standard errors of the other. (Away from the
+/// normal they differ: the semi-infinite medium is brighter at grazing
+/// angles than a Lambertian surface; see the README.)
+#[test]
+fn a_subsurface_ball_of_tiny_radius_matches_the_lambertian_along_the_normal() {
+    let ball = |material: &str| {
+        format!(
+            r#"
+[camera]
+look_from = [0, 0, 5]
+look_at = [0, 0, 0]
+ortho_half_height = 0.1
+[environment]
+color = 1.0
+[[objects]]
+shape = {{ type = "sphere", radius = 1.0 }}
+material = {material}
+"#
+        )
+    };
+    let settings = path_settings(16, 16, 64, 1024);
+    let sss = render_toml(
+        &ball("{ subsurface_color = 0.6, subsurface_radius = 0.002 }"),
+        config(settings.clone(), IntegratorKind::Recursive),
+    )
+    .film
+    .unwrap();
+    let lambert = render_toml(
+        &ball("{ color = 0.6 }"),
+        config(settings, IntegratorKind::Recursive),
+    )
+    .film
+    .unwrap();
+    let (a, sa) = mean_and_error(&sss);
+    let (b, sb) = mean_and_error(&lambert);
+    let combined = (sa * sa + sb * sb).sqrt();
+    assert!(combined < 0.004, "standard error {combined} too large");
+    assert!(
+        (a - b).abs() < 4.0 * combined,
+        "subsurface {a} (se {sa}) vs Lambertian {b} (se {sb})"
+    );
+    assert!((b - 0.6).abs() < 4.0 * sb, "Lambertian {b} (se {sb})");
+}
