@@ -153,8 +153,11 @@ fn gauss_legendre_unit<const N: usize>() -> ([f64; N], [f64; N]) {
 /// Chandrasekhar's H-function of isotropic scattering with
 /// single-scattering albedo `omega` at direction cosine `mu`, from its
 /// integral equation in the form `1/H(mu) = sqrt(1 - omega) + (omega/2)
-/// int_0^1 mu' H(mu') / (mu + mu') dmu'`, iterated to convergence on 48
-/// Gauss-Legendre nodes.
+/// int_0^1 mu' H(mu') / (mu + mu') dmu'`, iterated on 48 Gauss-Legendre
+/// nodes until it changes by less than 1e-13 or for 2000 rounds. The
+/// iteration converges for `omega < 1` (slowly near 1: at 0.99 it stops at
+/// the round limit, within about 1e-7) and not at `omega = 1`, which
+/// callers never ask for (colours are below 1).
 pub fn chandrasekhar_h(omega: f64, mu: f64) -> f64 {
     const N: usize = 48;
     let (x, w) = gauss_legendre_unit::<N>();
@@ -233,13 +236,16 @@ impl Medium {
 /// before and after scattering (it integrates to one over the sphere).
 #[inline]
 pub fn henyey_greenstein(cos: f32, g: f32) -> f32 {
+    // |g| below 1e-3 is isotropic, as [`sample_henyey_greenstein`] draws it
+    // (its inverse is unstable there): density and sampling stay one pair.
+    let g = if g.abs() < 1e-3 { 0.0 } else { g };
     let denom = 1.0 + g * g - 2.0 * g * cos;
     (1.0 - g * g) / (4.0 * PI * denom * denom.max(1e-12).sqrt())
 }
 
 /// A direction drawn from the Henyey-Greenstein lobe around the
 /// propagation direction `forward` (unit), by inverting its cumulative
-/// distribution in the cosine; its density is
+/// distribution in the cosine (uniform for |g| < 1e-3); its density is
 /// `henyey_greenstein(forward . wi, g)`.
 #[inline]
 pub fn sample_henyey_greenstein(forward: Vec3A, g: f32, u: Vec2) -> Vec3A {

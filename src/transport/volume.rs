@@ -161,7 +161,11 @@ fn beyond(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> Vec3A {
 fn extinction_for(m: &Medium, live: [bool; 3], u: f32, weight: &mut Color) -> Option<f32> {
     let st = m.sigma_t();
     let first = live.iter().position(|&l| l)?;
-    let grey = (0..3).all(|c| !live[c] || st[c] == st[first]);
+    // Extinctions within a few ulps count as one: `sigma_a + sigma_s` of
+    // an albedo and a grey mean free path rounds differently per channel,
+    // and an exact comparison would narrow such paths at random (colour
+    // noise for nothing; the bias of treating them as equal is ~1e-7).
+    let grey = (0..3).all(|c| !live[c] || (st[c] - st[first]).abs() <= 4e-7 * st[first].abs());
     if grey {
         return Some(st[first]);
     }
@@ -717,6 +721,14 @@ mod tests {
         let mut w = Color::new(0.5, 0.25, 1.0);
         assert_eq!(extinction_for(&grey, [true; 3], 0.9, &mut w), Some(1.0));
         assert_eq!(w, Color::new(0.5, 0.25, 1.0));
+        // A coloured albedo over a grey mean free path is grey too, although
+        // `sigma_a + sigma_s` rounds differently per channel (0.03 and 0.1
+        // give 10.000001 against 10).
+        let artist =
+            Medium::from_albedo(Color::new(0.03, 0.5, 0.9), Color::splat(0.1), 0.0).unwrap();
+        let mut w = Color::new(0.5, 0.25, 1.0);
+        assert!(extinction_for(&artist, [true; 3], 0.9, &mut w).is_some());
+        assert_eq!(w, Color::new(0.5, 0.25, 1.0), "{:?}", artist.sigma_t());
         let chroma = Medium::checked(Color::ZERO, Color::new(1.0, 2.0, 4.0), 0.0).unwrap();
         let mut mean = Color::ZERO;
         for u in [0.1f32, 0.5, 0.9] {
