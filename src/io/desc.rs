@@ -271,7 +271,8 @@ pub fn default_environment() -> (crate::scene::environment::Environment, String)
 pub const DEFAULT_KEY_LUX: f32 = std::f32::consts::PI;
 
 /// The lights an unlit scene gets under Whitted, photon and radiosity
-/// transport ([`SceneDesc::ensure_light`]), and a few words saying what they are: one directional "key" light of
+/// transport ([`SceneDesc::ensure_light`]), and a few words saying what
+/// they are: one directional "key" light of
 /// [`DEFAULT_KEY_LUX`] lux, white, shining from behind the camera's left
 /// shoulder (from the eye's side, rotated 30 degrees up and 30 degrees to
 /// the left of the viewing direction) so that faces turned towards the
