@@ -93,21 +93,10 @@ fn a_scattering_sphere_in_a_white_furnace_disappears() {
 /// `omega`, index-matched, under a uniform white sky, seen straight down
 /// by an orthographic camera.
 fn chandrasekhar(omega: f32) -> String {
-    format!(
-        r#"
-[camera]
-look_from = [0, 1005, 0]
-look_at = [0, 0, 0]
-up = [0, 0, -1]
-ortho_half_height = 0.5
-[environment]
-color = 1.0
-[[objects]]
-shape = {{ type = "sphere", radius = 1000.0 }}
-material = {{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = {omega}, absorption = {} }}
-"#,
+    subsurface_slab(&format!(
+        "{{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = {omega}, absorption = {} }}",
         1.0 - omega
-    )
+    ))
 }
 
 /// Chandrasekhar's H-function results for a semi-infinite isotropic
