@@ -31,11 +31,11 @@ use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
+    ClosestHits, EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{ClassHitQueues, ShadeTargets};
 use crate::integrators::wavefront::stages::{
-    self as kernels, RoutingScratch, ShadeScratch, ShadowScratch,
+    self as kernels, ShadeInput, ShadeScratch, ShadowScratch,
 };
 use crate::integrators::wavefront::{self, Stage, StageSeconds, WavefrontReport};
 use crate::scene::RenderScene;
@@ -78,7 +78,12 @@ pub struct CurrentRays(pub RayQueue);
 #[derive(Resource, Default)]
 pub struct NextRays(pub RayQueue);
 
-/// Rays that missed everything this bounce.
+/// The closest hit of each ray of this bounce, indexed like
+/// [`CurrentRays`].
+#[derive(Resource, Default)]
+pub struct BounceHits(pub ClosestHits);
+
+/// Rays that missed everything this bounce (their indices).
 #[derive(Resource, Default)]
 pub struct EscapedRays(pub EscapedQueue);
 
@@ -150,6 +155,12 @@ macro_rules! class_hit_queues {
                     $(MaterialClass::$class => &mut self.$field.0,)+
                 }
             }
+
+            fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()] {
+                let queues = [$((MaterialClass::$class, &mut self.$field.0)),+];
+                debug_assert!(queues.iter().enumerate().all(|(i, (c, _))| *c as usize == i));
+                queues.map(|(_, q)| q)
+            }
         }
 
         /// The hit queue of `class` in `world`.
@@ -208,7 +219,6 @@ pub struct PixelSums(pub PixelAccumulator);
 /// Reusable per-chunk scratch buffers of the parallel stages.
 #[derive(Resource, Default)]
 pub struct StageScratch {
-    routing: RoutingScratch,
     shading: ShadeScratch,
     shadows: ShadowScratch,
 }
@@ -227,8 +237,7 @@ impl StageScratch {
 
     /// Bytes allocated by all scratch buffers.
     pub fn bytes(&self) -> usize {
-        self.routing.iter().map(|c| c.bytes()).sum::<usize>()
-            + self.shadows.bytes()
+        self.shadows.bytes()
             + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
 }
@@ -324,6 +333,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.add_schedule(finish);
     world.init_resource::<CurrentRays>();
     world.init_resource::<NextRays>();
+    world.init_resource::<BounceHits>();
     world.init_resource::<EscapedRays>();
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
@@ -373,7 +383,7 @@ pub fn generate_camera_rays(
 pub fn intersect_closest(
     frame: Res<WavefrontFrame>,
     rays: Res<CurrentRays>,
-    mut scratch: ResMut<StageScratch>,
+    mut found: ResMut<BounceHits>,
     mut escaped: ResMut<EscapedRays>,
     mut hits: HitQueuesMut,
     mut stats: ResMut<WavefrontStats>,
@@ -383,7 +393,7 @@ pub fn intersect_closest(
             &frame.scene,
             &frame.classes,
             &rays.0,
-            &mut scratch.routing,
+            &mut found.0,
             &mut escaped.0,
             &mut hits,
         )
@@ -395,12 +405,19 @@ pub fn intersect_closest(
 pub fn handle_escaped_rays(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
+    rays: Res<CurrentRays>,
     mut escaped: ResMut<EscapedRays>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::HandleEscapedRays, |_| {
-        kernels::handle_escaped_rays(&frame.scene, &config.settings, &escaped.0, &mut radiance.0);
+        kernels::handle_escaped_rays(
+            &frame.scene,
+            &config.settings,
+            &rays.0,
+            &escaped.0,
+            &mut radiance.0,
+        );
         escaped.0.clear();
     });
 }
@@ -410,6 +427,8 @@ pub fn handle_escaped_rays(
 pub struct ShadeParams<'w> {
     config: Res<'w, RenderConfig>,
     frame: Res<'w, WavefrontFrame>,
+    rays: Res<'w, CurrentRays>,
+    found: Res<'w, BounceHits>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
     shadows: ResMut<'w, ShadowRays>,
@@ -423,6 +442,8 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
     let ShadeParams {
         config,
         frame,
+        rays,
+        found,
         mut scratch,
         mut radiance,
         mut shadows,
@@ -443,7 +464,11 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
             &config.settings,
             &frame.paths,
             first,
-            &hits.0,
+            ShadeInput {
+                rays: &rays.0,
+                found: &found.0,
+                hits: &hits.0,
+            },
             &mut scratch.shading,
             to,
         );
@@ -502,6 +527,7 @@ pub fn trace_shadow_rays(
 pub fn record_queue_bytes(
     rays: Res<CurrentRays>,
     next: Res<NextRays>,
+    found: Res<BounceHits>,
     escaped: Res<EscapedRays>,
     hits: HitQueues,
     shadows: Res<ShadowRays>,
@@ -511,6 +537,7 @@ pub fn record_queue_bytes(
 ) {
     let bytes = rays.0.bytes()
         + next.0.bytes()
+        + found.0.bytes()
         + escaped.0.bytes()
         + hits.bytes()
         + shadows.0.bytes()

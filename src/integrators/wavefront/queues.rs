@@ -6,8 +6,10 @@
 //! NaN or infinity enters a queue.
 
 use glam::{Vec2, Vec3A};
+use rayon::prelude::*;
 
 use crate::core::math::{Color, Ray, RayCone};
+use crate::integrators::wavefront::CHUNK;
 use crate::scene::Hit;
 
 /// Memory held by a queue's buffers, in bytes (capacity, not length).
@@ -133,6 +135,48 @@ impl RayQueue {
     }
 }
 
+impl RayQueue {
+    /// Replaces the queue's rays with `item(0)`, ..., `item(count - 1)`,
+    /// made in parallel chunks of [`CHUNK`] rays, each written in place.
+    pub fn fill_with(&mut self, count: usize, item: impl Fn(usize) -> RayItem + Sync) {
+        self.clear();
+        self.origin.resize(count, Vec3A::ZERO);
+        self.direction.resize(count, Vec3A::ZERO);
+        self.throughput.resize(count, Color::ZERO);
+        self.path.resize(count, 0);
+        self.depth.resize(count, 0);
+        self.pdf.resize(count, 0.0);
+        self.cone.resize(count, RayCone::NONE);
+        (
+            self.origin.par_chunks_mut(CHUNK),
+            self.direction.par_chunks_mut(CHUNK),
+            self.throughput.par_chunks_mut(CHUNK),
+            self.path.par_chunks_mut(CHUNK),
+            self.depth.par_chunks_mut(CHUNK),
+            self.pdf.par_chunks_mut(CHUNK),
+            self.cone.par_chunks_mut(CHUNK),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(c, (origin, direction, throughput, path, depth, pdf, cone))| {
+                for k in 0..origin.len() {
+                    let it = item(c * CHUNK + k);
+                    debug_assert!(
+                        it.ray.origin.is_finite() && it.ray.direction.is_finite(),
+                        "non-finite ray: {it:?}"
+                    );
+                    origin[k] = it.ray.origin;
+                    direction[k] = it.ray.direction;
+                    throughput[k] = it.throughput;
+                    path[k] = it.path;
+                    depth[k] = it.depth;
+                    pdf[k] = it.pdf;
+                    cone[k] = it.cone;
+                }
+            });
+    }
+}
+
 soa_queue!(
     RayQueue,
     "rays",
@@ -140,7 +184,10 @@ soa_queue!(
     [origin, direction, throughput, path, depth, pdf, cone]
 );
 
-/// A surface hit waiting to be shaded.
+/// A surface hit as a shading stage sees it: the hit found by a ray of
+/// the current bounce, with that ray's path state. Built on the fly from
+/// the ray queue and the closest hits ([`HitItem::new`]); the hit queues
+/// themselves hold only ray indices.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HitItem {
     /// Direction of the ray that found the hit.
@@ -174,7 +221,7 @@ pub struct HitItem {
 }
 
 impl HitItem {
-    /// Queues `hit`, found by `ray` (whose direction is unit).
+    /// The shading view of `hit`, found by `ray` (whose direction is unit).
     #[inline]
     pub fn new(hit: &Hit, ray: &RayItem) -> Self {
         Self {
@@ -212,150 +259,44 @@ impl HitItem {
     }
 }
 
-/// Hits of one material class, by field.
+/// The closest hit of every ray of the current bounce, indexed like the
+/// ray queue (`None`: the ray left the scene). The closest-hit stage
+/// writes it in place, chunk by chunk; the shading stages read it.
 #[derive(Clone, Debug, Default)]
-pub struct HitQueue {
-    /// Ray directions.
-    pub direction: Vec<Vec3A>,
-    /// Hit points.
-    pub point: Vec<Vec3A>,
-    /// Geometric normals.
-    pub geometric_normal: Vec<Vec3A>,
-    /// Shading normals.
-    pub shading_normal: Vec<Vec3A>,
-    /// Texture coordinates.
-    pub uv: Vec<Vec2>,
-    /// Material indices.
-    pub material: Vec<u32>,
-    /// Path throughputs.
-    pub throughput: Vec<Color>,
-    /// Path indices.
-    pub path: Vec<u32>,
-    /// Instances hit.
-    pub instance: Vec<u32>,
-    /// Segment lengths.
-    pub distance: Vec<f32>,
-    /// Direction densities.
-    pub pdf: Vec<f32>,
-    /// Bounce depths.
-    pub depth: Vec<u32>,
-    /// Texture coordinates per world length.
-    pub uv_density: Vec<f32>,
-    /// Ray cones (at the rays' origins).
-    pub cone: Vec<RayCone>,
-}
+pub struct ClosestHits(pub Vec<Option<Hit>>);
 
-impl HitQueue {
-    /// Appends a hit.
-    #[inline]
-    pub fn push(&mut self, item: HitItem) {
-        debug_assert!(
-            item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
-            "non-finite hit pushed: {item:?}"
-        );
-        self.direction.push(item.direction);
-        self.point.push(item.point);
-        self.geometric_normal.push(item.geometric_normal);
-        self.shading_normal.push(item.shading_normal);
-        self.uv.push(item.uv);
-        self.material.push(item.material);
-        self.throughput.push(item.throughput);
-        self.path.push(item.path);
-        self.depth.push(item.depth);
-        self.instance.push(item.instance);
-        self.distance.push(item.distance);
-        self.pdf.push(item.pdf);
-        self.uv_density.push(item.uv_density);
-        self.cone.push(item.cone);
-    }
-
-    /// The hit at `i`.
-    #[inline]
-    pub fn get(&self, i: usize) -> HitItem {
-        HitItem {
-            direction: self.direction[i],
-            point: self.point[i],
-            geometric_normal: self.geometric_normal[i],
-            shading_normal: self.shading_normal[i],
-            uv: self.uv[i],
-            material: self.material[i],
-            throughput: self.throughput[i],
-            path: self.path[i],
-            depth: self.depth[i],
-            instance: self.instance[i],
-            distance: self.distance[i],
-            pdf: self.pdf[i],
-            uv_density: self.uv_density[i],
-            cone: self.cone[i],
-        }
+impl QueueBytes for ClosestHits {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.0)
     }
 }
 
-soa_queue!(
-    HitQueue,
-    "hits",
-    path,
-    [
-        direction,
-        point,
-        geometric_normal,
-        shading_normal,
-        uv,
-        material,
-        throughput,
-        path,
-        instance,
-        distance,
-        pdf,
-        depth,
-        uv_density,
-        cone
-    ]
-);
+/// A queue of rays of the current bounce by index: the rays whose hit is
+/// on one material class (a hit queue), or the rays that escaped. Items
+/// are 4 bytes; what a stage needs of a ray it reads from the ray queue
+/// and [`ClosestHits`] at that index.
+#[derive(Clone, Debug, Default)]
+pub struct RayIndexQueue {
+    /// Indices into the ray queue, ascending.
+    pub ray: Vec<u32>,
+}
+
+impl RayIndexQueue {
+    /// Appends ray `i`.
+    #[inline]
+    pub fn push(&mut self, i: u32) {
+        self.ray.push(i);
+    }
+}
+
+soa_queue!(RayIndexQueue, "rays", ray, [ray]);
+
+/// Hits on one material class: indices of the rays that found them.
+pub type HitQueue = RayIndexQueue;
 
 /// Rays that left the scene: they bring back the background or the
 /// environment.
-#[derive(Clone, Debug, Default)]
-pub struct EscapedQueue {
-    /// Path throughputs.
-    pub throughput: Vec<Color>,
-    /// Path indices.
-    pub path: Vec<u32>,
-    /// Directions (unit), where the environment is looked up; empty when
-    /// the scene has no environment (then nothing reads them).
-    pub direction: Vec<Vec3A>,
-    /// Direction densities (path tracing; see [`RayItem::pdf`]), for
-    /// multiple importance sampling of the environment; empty like
-    /// `direction`.
-    pub pdf: Vec<f32>,
-}
-
-impl EscapedQueue {
-    /// Appends an escaped ray of a scene without an environment (it
-    /// brings back the constant background).
-    #[inline]
-    pub fn push(&mut self, path: u32, throughput: Color) {
-        debug_assert!(throughput.is_finite());
-        self.throughput.push(throughput);
-        self.path.push(path);
-    }
-
-    /// Appends an escaped ray with the direction and density the
-    /// environment is looked up and weighted with.
-    #[inline]
-    pub fn push_toward(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
-        self.push(path, throughput);
-        self.direction.push(direction);
-        self.pdf.push(pdf);
-    }
-}
-
-soa_queue!(
-    EscapedQueue,
-    "escaped rays",
-    path,
-    [throughput, path, direction, pdf]
-);
+pub type EscapedQueue = RayIndexQueue;
 
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]

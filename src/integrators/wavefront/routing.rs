@@ -4,18 +4,17 @@
 //! here, as pbrt-v4's `EnqueueWorkAfterMiss` and
 //! `EnqueueWorkAfterIntersection` make them:
 //!
-//! * after the closest-hit test ([`RoutedChunk::route`]), a ray that
-//!   missed goes to the escaped queue, a ray that hit goes to the hit queue
-//!   of its material's class;
+//! * after the closest-hit test ([`route_rays`]), a ray that missed goes
+//!   to the escaped queue, a ray that hit goes to the hit queue of its
+//!   material's class; both queues hold the ray's index only;
 //! * after shading ([`ShadeOutput`]), emission goes to the path's
 //!   radiance, shadow rays to the shadow queue, and reflection and
 //!   refraction rays to the next bounce's ray queue, every chunk's
 //!   reflections before every chunk's refractions.
 //!
-//! Stages route into per-chunk buffers (see
-//! [`drain`](crate::integrators::wavefront::drain)); [`join_routed`] and
-//! [`join_shade_outputs`] append them to the stage's output in chunk
-//! order.
+//! Shading stages route into per-chunk buffers (see
+//! [`drain`](crate::integrators::wavefront::drain)); [`join_shade_outputs`]
+//! appends them to the stage's output in chunk order.
 
 use crate::core::math::Color;
 use crate::integrators::counters::RayCounts;
@@ -31,75 +30,27 @@ use crate::transport::interaction::{RayKind, ShadowQuery};
 pub trait ClassHitQueues {
     /// The hit queue of `class`.
     fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue;
+
+    /// Every class's hit queue, indexed by `class as usize`.
+    fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()];
 }
 
-/// One chunk's hit queues, one per material class, indexed by
-/// `class as usize`.
-#[derive(Clone, Debug, Default)]
-struct ClassQueues([HitQueue; MaterialClass::ALL.len()]);
-
-/// One chunk of rays routed after the closest-hit test.
-#[derive(Clone, Debug, Default)]
-pub struct RoutedChunk {
-    escaped: EscapedQueue,
-    hits: ClassQueues,
-}
-
-impl RoutedChunk {
-    /// Removes every routed ray, keeping the buffers.
-    pub fn clear(&mut self) {
-        self.escaped.clear();
-        for q in &mut self.hits.0 {
-            q.clear();
-        }
-    }
-
-    /// Routes ray `i` of `rays` after its closest-hit test: a miss to the
-    /// escaped queue (with its direction and density when
-    /// `environment`: only an environment reads them), a hit to the queue
-    /// of its material's class (`classes` holds the class of each
-    /// material).
-    #[inline]
-    pub fn route(
-        &mut self,
-        classes: &[MaterialClass],
-        environment: bool,
-        rays: &RayQueue,
-        i: usize,
-        found: Option<Hit>,
-    ) {
-        match found {
-            None if environment => self.escaped.push_toward(
-                rays.path[i],
-                rays.throughput[i],
-                rays.direction[i],
-                rays.pdf[i],
-            ),
-            None => self.escaped.push(rays.path[i], rays.throughput[i]),
-            Some(h) => {
-                let class = classes[h.material as usize];
-                self.hits.0[class as usize].push(HitItem::new(&h, &rays.get(i)));
-            }
-        }
-    }
-
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.escaped.bytes() + self.hits.0.iter().map(|q| q.bytes()).sum::<usize>()
-    }
-}
-
-/// Appends routed chunks to the escaped queue and the hit queues, in
-/// chunk order.
-pub fn join_routed<'a>(
-    chunks: impl IntoIterator<Item = &'a RoutedChunk>,
+/// Routes every ray of the bounce after its closest-hit test, in ray
+/// order: ray `i`, whose closest hit is `found[i]`, goes to `escaped` on
+/// a miss, else to the hit queue of its material's class (`classes`
+/// holds the class of each material). Each queue receives ascending ray
+/// indices.
+pub fn route_rays(
+    classes: &[MaterialClass],
+    found: &[Option<Hit>],
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
 ) {
-    for chunk in chunks {
-        escaped.append(&chunk.escaped);
-        for class in MaterialClass::ALL {
-            hits.queue_mut(class).append(&chunk.hits.0[class as usize]);
+    let queues = hits.all_mut();
+    for (i, f) in found.iter().enumerate() {
+        match f {
+            None => escaped.push(i as u32),
+            Some(h) => queues[classes[h.material as usize] as usize].push(i as u32),
         }
     }
 }

@@ -6,6 +6,8 @@
 //! with [`drain`](crate::integrators::wavefront::drain) and leave where
 //! each result goes to [`routing`](crate::integrators::wavefront::routing).
 
+use rayon::prelude::*;
+
 use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, max_component};
 use crate::core::rng::Sampler;
@@ -13,12 +15,13 @@ use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
+use crate::integrators::wavefront::CHUNK;
 use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
+    ClosestHits, EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{
-    ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
+    ClassHitQueues, ShadeOutput, ShadeTargets, join_shade_outputs, route_rays,
 };
 use crate::integrators::{accumulate, camera_ray};
 use crate::scene::RenderScene;
@@ -30,10 +33,10 @@ use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::whitted::{direct_light, scatter};
 
-/// Stage: one camera ray per path of the batch `[first, first + count)`.
-/// Path `p` goes where `paths` says (sample `p % spp` of pixel `p / spp`
-/// for a whole image), with the same film position and sample keys as the
-/// recursive tracer.
+/// Stage: one camera ray per path of the batch `[first, first + count)`,
+/// made in parallel chunks. Path `p` goes where `paths` says (sample
+/// `p % spp` of pixel `p / spp` for a whole image), with the same film
+/// position and sample keys as the recursive tracer.
 pub fn generate_camera_rays(
     camera: &CameraRays,
     settings: &RenderSettings,
@@ -43,8 +46,7 @@ pub fn generate_camera_rays(
     out: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    out.clear();
-    for local in 0..count {
+    out.fill_with(count, |local| {
         let k = paths.path(first + local as u64);
         let mut sampler = Sampler::with_kind(
             settings.sampler,
@@ -52,43 +54,26 @@ pub fn generate_camera_rays(
             k.pixel(settings.width),
             k.sample,
         );
-        let ray = camera_ray(camera, k.x, k.y, settings.spp, &mut sampler);
-        out.push(RayItem {
-            ray,
+        RayItem {
+            ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
             throughput: Color::ONE,
             path: local as u32,
             depth: 0,
             pdf: 0.0,
             cone: camera.cone(),
-        });
-    }
+        }
+    });
     rays.camera += count as u64;
 }
 
-/// One chunk's buffers of [`intersect_closest`]: its routed rays.
-#[derive(Debug, Default)]
-pub struct IntersectChunk {
-    routed: RoutedChunk,
-}
-
-impl IntersectChunk {
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.routed.bytes()
-    }
-}
-
-/// Per-chunk buffers of [`intersect_closest`], kept between calls.
-pub type RoutingScratch = Vec<IntersectChunk>;
-
-/// Stage: closest hit for every ray of `rays`, routed to `escaped` or to
-/// the hit queue of the material's class. Chunks are traced and routed in
-/// parallel into `scratch`, then appended in chunk order.
+/// Stage: closest hit for every ray of `rays`, written in place into
+/// `found` (chunks traced in parallel), then each ray routed by index to
+/// `escaped` or to the hit queue of the material's class.
 pub fn intersect_closest(
     scene: &RenderScene,
     classes: &[MaterialClass],
     rays: &RayQueue,
-    scratch: &mut RoutingScratch,
+    found: &mut ClosestHits,
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
 ) {
@@ -99,28 +84,28 @@ pub fn intersect_closest(
     // are traced one at a time. Measured faster than mesh streams for
     // camera and for secondary rays since meshes have their own 8-wide
     // layout (README, "Measurement notes").
-    let environment = scene.environment().is_some();
-    let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
-        let IntersectChunk { routed } = chunk;
-        routed.clear();
-        let mut found = [None; LANES];
-        for i in range.clone() {
-            let lane = (i - range.start) % LANES;
-            if lane == 0 {
-                let n = (range.end - i).min(LANES);
-                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                if one_octant(&packet[..n]) {
-                    scene.intersect_packet_with(&packet[..n], &mut found, true);
+    let n = rays.len();
+    found.0.clear();
+    found.0.resize(n, None);
+    found
+        .0
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            for (k, lanes) in out.chunks_mut(LANES).enumerate() {
+                let i = c * CHUNK + k * LANES;
+                let m = lanes.len();
+                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(m - 1)));
+                if one_octant(&packet[..m]) {
+                    scene.intersect_packet_with(&packet[..m], lanes, true);
                 } else {
-                    for (f, r) in found.iter_mut().zip(&packet[..n]) {
+                    for (f, r) in lanes.iter_mut().zip(&packet[..m]) {
                         *f = scene.intersect(r, 0.0, f32::INFINITY);
                     }
                 }
             }
-            routed.route(classes, environment, rays, i, found[lane]);
-        }
-    });
-    join_routed(chunks.iter().map(|c| &c.routed), escaped, hits);
+        });
+    route_rays(classes, &found.0, escaped, hits);
 }
 
 /// Whether all `rays` point into one octant: the packets worth tracing
@@ -142,39 +127,60 @@ fn one_octant(rays: &[Ray]) -> bool {
 pub fn handle_escaped_rays(
     scene: &RenderScene,
     settings: &RenderSettings,
+    rays: &RayQueue,
     escaped: &EscapedQueue,
     radiance: &mut [Color],
 ) {
     if scene.environment().is_none() {
         let background = scene.background();
-        for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
-            radiance[path as usize] += t * background;
+        for &i in &escaped.ray {
+            let i = i as usize;
+            radiance[rays.path[i] as usize] += rays.throughput[i] * background;
         }
         return;
     }
-    for i in 0..escaped.len() {
-        let l = path::escaped(scene, settings, escaped.direction[i], escaped.pdf[i]);
-        radiance[escaped.path[i] as usize] += escaped.throughput[i] * l;
+    for &i in &escaped.ray {
+        let i = i as usize;
+        let l = path::escaped(scene, settings, rays.direction[i], rays.pdf[i]);
+        radiance[rays.path[i] as usize] += rays.throughput[i] * l;
     }
 }
 
 /// Per-chunk buffers of the shading stages.
 pub type ShadeScratch = Vec<ShadeOutput>;
 
-/// Runs `kernel` on every hit of `hits` with its interaction, in parallel
-/// chunks each writing its own [`ShadeOutput`], then joins the outputs in
-/// chunk order.
+/// What a shading stage reads: the bounce's rays, their closest hits and
+/// the hit queue of the class it shades (indices into both).
+#[derive(Clone, Copy)]
+pub struct ShadeInput<'a> {
+    /// Rays of the bounce.
+    pub rays: &'a RayQueue,
+    /// Their closest hits.
+    pub found: &'a ClosestHits,
+    /// The rays whose hits this stage shades.
+    pub hits: &'a HitQueue,
+}
+
+/// Runs `kernel` on every hit of `input.hits` with its interaction, in
+/// parallel chunks each writing its own [`ShadeOutput`], then joins the
+/// outputs in chunk order.
 fn shade_hits(
     scene: &RenderScene,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
     kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
 ) {
+    let ShadeInput { rays, found, hits } = input;
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
-        for i in range {
-            let mut h = hits.get(i);
+        for &i in &hits.ray[range] {
+            let i = i as usize;
+            let Some(hit) = &found.0[i] else {
+                debug_assert!(false, "ray {i} is queued for shading without a hit");
+                continue;
+            };
+            let mut h = HitItem::new(hit, &rays.get(i));
             let it =
                 Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             // A segment that ran through an absorbing interior carries its
@@ -201,11 +207,11 @@ fn shade_hits(
 pub fn shade<const LIT: bool, const SCATTER: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, input, scratch, to, |h, it, out| {
         if it.surface.emission != Color::ZERO {
             out.emit(h.path, h.throughput * it.surface.emission);
         }
@@ -251,11 +257,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     settings: &RenderSettings,
     paths: &PathMap,
     first: u64,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
             out.emit(h.path, h.throughput * e);
@@ -308,7 +314,7 @@ pub fn shade_class(
     settings: &RenderSettings,
     paths: &PathMap,
     first: u64,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
@@ -320,7 +326,7 @@ pub fn shade_class(
             // Every lit class also scatters diffusely under path transport.
             (true, _) => shade_path::<true, true>,
         };
-        return f(scene, settings, paths, first, hits, scratch, to);
+        return f(scene, settings, paths, first, input, scratch, to);
     }
     let f = match lobes {
         (false, false) => shade::<false, false>,
@@ -328,7 +334,7 @@ pub fn shade_class(
         (true, false) => shade::<true, false>,
         (true, true) => shade::<true, true>,
     };
-    f(scene, settings, hits, scratch, to)
+    f(scene, settings, input, scratch, to)
 }
 
 /// Reusable buffers of [`trace_shadow_rays`].
