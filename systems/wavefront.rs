@@ -237,8 +237,7 @@ impl StageScratch {
 
     /// Bytes allocated by all scratch buffers.
     pub fn bytes(&self) -> usize {
-        self.shadows.bytes()
-            + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
+        self.shadows.bytes() + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
 }
 

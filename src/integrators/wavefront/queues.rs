@@ -158,22 +158,24 @@ impl RayQueue {
         )
             .into_par_iter()
             .enumerate()
-            .for_each(|(c, (origin, direction, throughput, path, depth, pdf, cone))| {
-                for k in 0..origin.len() {
-                    let it = item(c * CHUNK + k);
-                    debug_assert!(
-                        it.ray.origin.is_finite() && it.ray.direction.is_finite(),
-                        "non-finite ray: {it:?}"
-                    );
-                    origin[k] = it.ray.origin;
-                    direction[k] = it.ray.direction;
-                    throughput[k] = it.throughput;
-                    path[k] = it.path;
-                    depth[k] = it.depth;
-                    pdf[k] = it.pdf;
-                    cone[k] = it.cone;
-                }
-            });
+            .for_each(
+                |(c, (origin, direction, throughput, path, depth, pdf, cone))| {
+                    for k in 0..origin.len() {
+                        let it = item(c * CHUNK + k);
+                        debug_assert!(
+                            it.ray.origin.is_finite() && it.ray.direction.is_finite(),
+                            "non-finite ray: {it:?}"
+                        );
+                        origin[k] = it.ray.origin;
+                        direction[k] = it.ray.direction;
+                        throughput[k] = it.throughput;
+                        path[k] = it.path;
+                        depth[k] = it.depth;
+                        pdf[k] = it.pdf;
+                        cone[k] = it.cone;
+                    }
+                },
+            );
     }
 }
 
@@ -448,6 +450,37 @@ mod tests {
         q.clear();
         assert!(q.is_empty());
         assert_eq!(q.bytes(), bytes, "clearing keeps the allocation");
+    }
+
+    /// Rays made in parallel chunks land where sequential pushes put
+    /// them, whatever the thread count.
+    #[test]
+    fn rays_filled_in_parallel_equal_rays_pushed_in_order() {
+        let item = |i: usize| RayItem {
+            ray: Ray::new(Vec3A::new(i as f32, 0.5, -1.0), Vec3A::Y),
+            throughput: Color::new(1.0, 0.5, i as f32),
+            path: i as u32,
+            depth: (i % 5) as u32,
+            pdf: 0.25 * i as f32,
+            cone: RayCone::NONE,
+        };
+        let n = 3 * CHUNK + 5;
+        let mut pushed = RayQueue::default();
+        for i in 0..n {
+            pushed.push(item(i));
+        }
+        for threads in [1, 2, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut filled = RayQueue::default();
+            // A longer queue first: filling replaces it.
+            filled.push(item(7));
+            pool.install(|| filled.fill_with(n, item));
+            assert_eq!(filled.len(), n);
+            assert!((0..n).all(|i| filled.get(i) == pushed.get(i)), "{threads}");
+        }
     }
 
     #[test]

@@ -156,3 +156,74 @@ pub fn join_shade_outputs(outputs: &mut [ShadeOutput], to: ShadeTargets<'_>) {
         to.next.append(&out.refractions);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3A};
+
+    use super::*;
+
+    /// Hit queues indexed by class, as the ECS side keeps them.
+    #[derive(Default)]
+    struct Queues([HitQueue; MaterialClass::ALL.len()]);
+
+    impl ClassHitQueues for Queues {
+        fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue {
+            &mut self.0[class as usize]
+        }
+
+        fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()] {
+            self.0.each_mut()
+        }
+    }
+
+    fn hit(material: u32) -> Hit {
+        Hit {
+            t: 1.0,
+            point: Vec3A::ZERO,
+            geometric_normal: Vec3A::Y,
+            shading_normal: Vec3A::Y,
+            uv: Vec2::ZERO,
+            uv_density: 0.0,
+            instance: 0,
+            material,
+        }
+    }
+
+    /// Every ray goes to exactly one queue: misses to the escaped queue,
+    /// hits to their material's class, each queue in ascending ray order
+    /// (the order shading then reads them in, which keeps the next
+    /// bounce's ray order, and so the image, what it was with copied hits).
+    #[test]
+    fn every_ray_is_routed_once_by_class_in_ray_order() {
+        let classes = [
+            MaterialClass::Diffuse,
+            MaterialClass::Glass,
+            MaterialClass::Diffuse,
+        ];
+        let found: Vec<Option<Hit>> = (0..1000u32)
+            .map(|i| (i % 7 != 3).then(|| hit(i % 3)))
+            .collect();
+        let mut escaped = EscapedQueue::default();
+        let mut queues = Queues::default();
+        route_rays(&classes, &found, &mut escaped, &mut queues);
+        let mut seen = vec![0u32; found.len()];
+        for &i in &escaped.ray {
+            assert!(found[i as usize].is_none());
+            seen[i as usize] += 1;
+        }
+        for class in MaterialClass::ALL {
+            let q = &queues.0[class as usize];
+            assert!(q.ray.windows(2).all(|w| w[0] < w[1]), "{class:?}");
+            for &i in &q.ray {
+                let m = found[i as usize].expect("a hit").material;
+                assert_eq!(classes[m as usize], class);
+                seen[i as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1));
+        assert_eq!(escaped.len(), (0..1000).filter(|i| i % 7 == 3).count());
+        assert!(queues.0[MaterialClass::Mirror as usize].is_empty());
+        assert!(!queues.0[MaterialClass::Glass as usize].is_empty());
+    }
+}
