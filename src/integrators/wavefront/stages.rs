@@ -383,17 +383,13 @@ pub fn trace_shadow_rays(
         for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
             let j = range.start + k * LANES;
             let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(lanes.len() - 1)));
-            let rays = &rays[..lanes.len()];
-            if one_octant(rays) {
-                let blocked =
-                    scene.occluded_packet_with(rays, &seg.t_max[j..j + lanes.len()], false);
-                for (l, v) in lanes.iter_mut().enumerate() {
-                    *v = blocked & (1 << l) == 0;
-                }
-            } else {
-                for (l, (v, r)) in lanes.iter_mut().zip(rays).enumerate() {
-                    *v = !scene.occluded(r, 0.0, seg.t_max[j + l]);
-                }
+            let blocked = scene.occluded_packet_with(
+                &rays[..lanes.len()],
+                &seg.t_max[j..j + lanes.len()],
+                false,
+            );
+            for (l, v) in lanes.iter_mut().enumerate() {
+                *v = blocked & (1 << l) == 0;
             }
         }
     });
