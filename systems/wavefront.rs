@@ -31,11 +31,11 @@ use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitQueue, MediumQueue, QueueBytes, RayQueue, ShadowSegments,
+    ClosestHits, EscapedQueue, HitQueue, QueueBytes, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{ClassHitQueues, ShadeTargets};
 use crate::integrators::wavefront::stages::{
-    self as kernels, MediaScratch, MediaTargets, RoutingScratch, ShadeScratch, ShadowScratch,
+    self as kernels, MediaScratch, MediaTargets, ShadeInput, ShadeScratch, ShadowScratch,
 };
 use crate::integrators::wavefront::{self, Stage, StageSeconds, WavefrontReport};
 use crate::scene::RenderScene;
@@ -58,10 +58,11 @@ pub struct FinishBatch;
 /// The stages of a bounce, in order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum WavefrontSystems {
-    /// Closest hits; routing to the escaped and per-class hit queues (or,
-    /// with media, to the medium queue).
+    /// Closest hits; routing to the escaped and per-class hit queues
+    /// (with media, routing is left to the next stage).
     IntersectClosest,
-    /// Rays followed through participating media (scenes with media).
+    /// Rays followed through participating media, then routed (scenes
+    /// with media under path transport).
     SampleMedia,
     /// Background radiance for rays that left the scene.
     HandleEscapedRays,
@@ -81,11 +82,12 @@ pub struct CurrentRays(pub RayQueue);
 #[derive(Resource, Default)]
 pub struct NextRays(pub RayQueue);
 
-/// Rays of a scene with media waiting to be followed through them.
+/// The closest hit of each ray of this bounce, indexed like
+/// [`CurrentRays`].
 #[derive(Resource, Default)]
-pub struct MediaRays(pub MediumQueue);
+pub struct BounceHits(pub ClosestHits);
 
-/// Rays that missed everything this bounce.
+/// Rays that missed everything this bounce (their indices).
 #[derive(Resource, Default)]
 pub struct EscapedRays(pub EscapedQueue);
 
@@ -157,6 +159,12 @@ macro_rules! class_hit_queues {
                     $(MaterialClass::$class => &mut self.$field.0,)+
                 }
             }
+
+            fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()] {
+                let queues = [$((MaterialClass::$class, &mut self.$field.0)),+];
+                debug_assert!(queues.iter().enumerate().all(|(i, (c, _))| *c as usize == i));
+                queues.map(|(_, q)| q)
+            }
         }
 
         /// The hit queue of `class` in `world`.
@@ -215,7 +223,6 @@ pub struct PixelSums(pub PixelAccumulator);
 /// Reusable per-chunk scratch buffers of the parallel stages.
 #[derive(Resource, Default)]
 pub struct StageScratch {
-    routing: RoutingScratch,
     media: MediaScratch,
     shading: ShadeScratch,
     shadows: ShadowScratch,
@@ -233,10 +240,15 @@ impl StageScratch {
         self.shading.iter().map(|s| s.refraction_bytes()).sum()
     }
 
+    /// Bytes the medium stage holds (its segment updates and outputs):
+    /// zero when it never ran.
+    pub fn media_bytes(&self) -> usize {
+        self.media.iter().map(|c| c.bytes()).sum()
+    }
+
     /// Bytes allocated by all scratch buffers.
     pub fn bytes(&self) -> usize {
-        self.routing.iter().map(|c| c.bytes()).sum::<usize>()
-            + self.media.iter().map(|c| c.bytes()).sum::<usize>()
+        self.media.iter().map(|c| c.bytes()).sum::<usize>()
             + self.shadows.bytes()
             + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
@@ -340,8 +352,8 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.add_schedule(finish);
     world.init_resource::<CurrentRays>();
     world.init_resource::<NextRays>();
+    world.init_resource::<BounceHits>();
     world.init_resource::<EscapedRays>();
-    world.init_resource::<MediaRays>();
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathRadiance>();
@@ -395,10 +407,9 @@ pub fn generate_camera_rays(
 pub fn intersect_closest(
     frame: Res<WavefrontFrame>,
     rays: Res<CurrentRays>,
-    mut scratch: ResMut<StageScratch>,
+    mut found: ResMut<BounceHits>,
     mut escaped: ResMut<EscapedRays>,
     mut hits: HitQueuesMut,
-    mut media: ResMut<MediaRays>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::IntersectClosest, |_| {
@@ -406,36 +417,40 @@ pub fn intersect_closest(
             &frame.scene,
             &frame.classes,
             &rays.0,
-            &mut scratch.routing,
+            &mut found.0,
             &mut escaped.0,
             &mut hits,
-            (frame.media, &mut media.0),
+            !frame.media,
         )
     });
 }
 
-/// Stage: follows the rays of a scene with media through them; drains
-/// the medium queue into the escaped and hit queues, the paths'
-/// radiance, the shadow queue and the next bounce's rays.
+/// Stage: follows the rays of a scene with media through them, updating
+/// the rays and their hits in place; routes them to the escaped and hit
+/// queues and adds radiance, shadow rays and the next bounce's rays of
+/// scattering events.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_media(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
-    mut media: ResMut<MediaRays>,
+    mut rays: ResMut<CurrentRays>,
+    mut found: ResMut<BounceHits>,
     mut escaped: ResMut<EscapedRays>,
     mut hits: HitQueuesMut,
-    params: ShadeParams,
+    mut scratch: ResMut<StageScratch>,
+    mut radiance: ResMut<PathRadiance>,
+    mut shadows: ResMut<ShadowRays>,
+    mut next: ResMut<NextRays>,
+    mut stats: ResMut<WavefrontStats>,
 ) {
-    let ShadeParams {
-        mut scratch,
-        mut radiance,
-        mut shadows,
-        mut next,
-        mut stats,
-        ..
-    } = params;
     let first = frame.batches[frame.batch].0;
     stats.0.run_stage(Stage::SampleMedia, |counters| {
+        // Forced to run (`StageGating::force_all`) in a scene without
+        // media, the stage has nothing to do: the closest-hit stage has
+        // routed every ray already.
+        if !frame.media {
+            return;
+        }
         let to = MediaTargets {
             escaped: &mut escaped.0,
             hits: &mut hits,
@@ -452,11 +467,11 @@ pub fn sample_media(
             &frame.paths,
             first,
             &frame.classes,
-            &media.0,
+            &mut rays.0,
+            &mut found.0,
             &mut scratch.media,
             to,
         );
-        media.0.clear();
     });
 }
 
@@ -465,12 +480,19 @@ pub fn sample_media(
 pub fn handle_escaped_rays(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
+    rays: Res<CurrentRays>,
     mut escaped: ResMut<EscapedRays>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::HandleEscapedRays, |_| {
-        kernels::handle_escaped_rays(&frame.scene, &config.settings, &escaped.0, &mut radiance.0);
+        kernels::handle_escaped_rays(
+            &frame.scene,
+            &config.settings,
+            &rays.0,
+            &escaped.0,
+            &mut radiance.0,
+        );
         escaped.0.clear();
     });
 }
@@ -480,6 +502,8 @@ pub fn handle_escaped_rays(
 pub struct ShadeParams<'w> {
     config: Res<'w, RenderConfig>,
     frame: Res<'w, WavefrontFrame>,
+    rays: Res<'w, CurrentRays>,
+    found: Res<'w, BounceHits>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
     shadows: ResMut<'w, ShadowRays>,
@@ -493,6 +517,8 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
     let ShadeParams {
         config,
         frame,
+        rays,
+        found,
         mut scratch,
         mut radiance,
         mut shadows,
@@ -513,7 +539,11 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
             &config.settings,
             &frame.paths,
             first,
-            &hits.0,
+            ShadeInput {
+                rays: &rays.0,
+                found: &found.0,
+                hits: &hits.0,
+            },
             &mut scratch.shading,
             to,
         );
@@ -573,18 +603,18 @@ pub fn trace_shadow_rays(
 pub fn record_queue_bytes(
     rays: Res<CurrentRays>,
     next: Res<NextRays>,
+    found: Res<BounceHits>,
     escaped: Res<EscapedRays>,
     hits: HitQueues,
     shadows: Res<ShadowRays>,
     scratch: Res<StageScratch>,
     radiance: Res<PathRadiance>,
-    media: Res<MediaRays>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     let bytes = rays.0.bytes()
         + next.0.bytes()
+        + found.0.bytes()
         + escaped.0.bytes()
-        + media.0.bytes()
         + hits.bytes()
         + shadows.0.bytes()
         + scratch.bytes()

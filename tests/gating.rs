@@ -14,7 +14,7 @@ use prism::integrators::IntegratorKind;
 use prism::integrators::wavefront::queues::QueueBytes;
 use prism::integrators::wavefront::{Stage, StageRuns};
 use prism::scene::material::MaterialClass;
-use prism::systems::wavefront::{MediaRays, ShadowRays, StageGating, StageScratch, hit_queue};
+use prism::systems::wavefront::{ShadowRays, StageGating, StageScratch, hit_queue};
 use prism::systems::{Frame, Renderer};
 
 use common::render::{config, renderer};
@@ -152,7 +152,7 @@ fn a_scene_without_lights_traces_no_shadow_rays() {
     );
 }
 
-/// The medium stage runs, and its queue is allocated, only for path
+/// The medium stage runs, and its buffers are allocated, only for path
 /// transport of a scene with media; a fog under Whitted transport only
 /// attenuates and needs no medium stage either.
 #[test]
@@ -160,7 +160,7 @@ fn only_path_transport_of_a_scene_with_media_runs_the_medium_stage() {
     for transport in [Transport::Whitted, Transport::Path] {
         let r = wavefront_world(&diffuse_only(), transport, false);
         assert_eq!(runs(&r).get(Stage::SampleMedia), 0, "{transport:?}");
-        assert_eq!(r.world().resource::<MediaRays>().0.bytes(), 0);
+        assert_eq!(r.world().resource::<StageScratch>().media_bytes(), 0);
     }
     let foggy = format!(
         "{}\n[medium]\nscattering = 0.2\nabsorption = 0.05\n",
@@ -168,10 +168,10 @@ fn only_path_transport_of_a_scene_with_media_runs_the_medium_stage() {
     );
     let r = wavefront_world(&foggy, Transport::Path, false);
     assert!(runs(&r).get(Stage::SampleMedia) > 0);
-    assert!(r.world().resource::<MediaRays>().0.bytes() > 0);
+    assert!(r.world().resource::<StageScratch>().media_bytes() > 0);
     let r = wavefront_world(&foggy, Transport::Whitted, false);
     assert_eq!(runs(&r).get(Stage::SampleMedia), 0);
-    assert_eq!(r.world().resource::<MediaRays>().0.bytes(), 0);
+    assert_eq!(r.world().resource::<StageScratch>().media_bytes(), 0);
 }
 
 #[test]

@@ -6,8 +6,10 @@
 //! NaN or infinity enters a queue.
 
 use glam::{Vec2, Vec3A};
+use rayon::prelude::*;
 
 use crate::core::math::{Color, Ray, RayCone};
+use crate::integrators::wavefront::CHUNK;
 use crate::scene::Hit;
 
 /// Memory held by a queue's buffers, in bytes (capacity, not length).
@@ -133,6 +135,50 @@ impl RayQueue {
     }
 }
 
+impl RayQueue {
+    /// Replaces the queue's rays with `item(0)`, ..., `item(count - 1)`,
+    /// made in parallel chunks of [`CHUNK`] rays, each written in place.
+    pub fn fill_with(&mut self, count: usize, item: impl Fn(usize) -> RayItem + Sync) {
+        self.clear();
+        self.origin.resize(count, Vec3A::ZERO);
+        self.direction.resize(count, Vec3A::ZERO);
+        self.throughput.resize(count, Color::ZERO);
+        self.path.resize(count, 0);
+        self.depth.resize(count, 0);
+        self.pdf.resize(count, 0.0);
+        self.cone.resize(count, RayCone::NONE);
+        (
+            self.origin.par_chunks_mut(CHUNK),
+            self.direction.par_chunks_mut(CHUNK),
+            self.throughput.par_chunks_mut(CHUNK),
+            self.path.par_chunks_mut(CHUNK),
+            self.depth.par_chunks_mut(CHUNK),
+            self.pdf.par_chunks_mut(CHUNK),
+            self.cone.par_chunks_mut(CHUNK),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(
+                |(c, (origin, direction, throughput, path, depth, pdf, cone))| {
+                    for k in 0..origin.len() {
+                        let it = item(c * CHUNK + k);
+                        debug_assert!(
+                            it.ray.origin.is_finite() && it.ray.direction.is_finite(),
+                            "non-finite ray: {it:?}"
+                        );
+                        origin[k] = it.ray.origin;
+                        direction[k] = it.ray.direction;
+                        throughput[k] = it.throughput;
+                        path[k] = it.path;
+                        depth[k] = it.depth;
+                        pdf[k] = it.pdf;
+                        cone[k] = it.cone;
+                    }
+                },
+            );
+    }
+}
+
 soa_queue!(
     RayQueue,
     "rays",
@@ -140,7 +186,10 @@ soa_queue!(
     [origin, direction, throughput, path, depth, pdf, cone]
 );
 
-/// A surface hit waiting to be shaded.
+/// A surface hit as a shading stage sees it: the hit found by a ray of
+/// the current bounce, with that ray's path state. Built on the fly from
+/// the ray queue and the closest hits ([`HitItem::new`]); the hit queues
+/// themselves hold only ray indices.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HitItem {
     /// Direction of the ray that found the hit.
@@ -174,7 +223,7 @@ pub struct HitItem {
 }
 
 impl HitItem {
-    /// Queues `hit`, found by `ray` (whose direction is unit).
+    /// The shading view of `hit`, found by `ray` (whose direction is unit).
     #[inline]
     pub fn new(hit: &Hit, ray: &RayItem) -> Self {
         Self {
@@ -212,198 +261,44 @@ impl HitItem {
     }
 }
 
-/// Hits of one material class, by field.
+/// The closest hit of every ray of the current bounce, indexed like the
+/// ray queue (`None`: the ray left the scene). The closest-hit stage
+/// writes it in place, chunk by chunk; the shading stages read it.
 #[derive(Clone, Debug, Default)]
-pub struct HitQueue {
-    /// Ray directions.
-    pub direction: Vec<Vec3A>,
-    /// Hit points.
-    pub point: Vec<Vec3A>,
-    /// Geometric normals.
-    pub geometric_normal: Vec<Vec3A>,
-    /// Shading normals.
-    pub shading_normal: Vec<Vec3A>,
-    /// Texture coordinates.
-    pub uv: Vec<Vec2>,
-    /// Material indices.
-    pub material: Vec<u32>,
-    /// Path throughputs.
-    pub throughput: Vec<Color>,
-    /// Path indices.
-    pub path: Vec<u32>,
-    /// Instances hit.
-    pub instance: Vec<u32>,
-    /// Segment lengths.
-    pub distance: Vec<f32>,
-    /// Direction densities.
-    pub pdf: Vec<f32>,
-    /// Bounce depths.
-    pub depth: Vec<u32>,
-    /// Texture coordinates per world length.
-    pub uv_density: Vec<f32>,
-    /// Ray cones (at the rays' origins).
-    pub cone: Vec<RayCone>,
+pub struct ClosestHits(pub Vec<Option<Hit>>);
+
+impl QueueBytes for ClosestHits {
+    fn bytes(&self) -> usize {
+        vec_bytes(&self.0)
+    }
 }
 
-impl HitQueue {
-    /// Appends a hit.
-    #[inline(always)]
-    pub fn push(&mut self, item: HitItem) {
-        debug_assert!(
-            item.point.is_finite() && item.direction.is_finite() && item.throughput.is_finite(),
-            "non-finite hit pushed: {item:?}"
-        );
-        self.direction.push(item.direction);
-        self.point.push(item.point);
-        self.geometric_normal.push(item.geometric_normal);
-        self.shading_normal.push(item.shading_normal);
-        self.uv.push(item.uv);
-        self.material.push(item.material);
-        self.throughput.push(item.throughput);
-        self.path.push(item.path);
-        self.depth.push(item.depth);
-        self.instance.push(item.instance);
-        self.distance.push(item.distance);
-        self.pdf.push(item.pdf);
-        self.uv_density.push(item.uv_density);
-        self.cone.push(item.cone);
-    }
+/// A queue of rays of the current bounce by index: the rays whose hit is
+/// on one material class (a hit queue), or the rays that escaped. Items
+/// are 4 bytes; what a stage needs of a ray it reads from the ray queue
+/// and [`ClosestHits`] at that index.
+#[derive(Clone, Debug, Default)]
+pub struct RayIndexQueue {
+    /// Indices into the ray queue, ascending.
+    pub ray: Vec<u32>,
+}
 
-    /// The hit at `i`.
+impl RayIndexQueue {
+    /// Appends ray `i`.
     #[inline]
-    pub fn get(&self, i: usize) -> HitItem {
-        HitItem {
-            direction: self.direction[i],
-            point: self.point[i],
-            geometric_normal: self.geometric_normal[i],
-            shading_normal: self.shading_normal[i],
-            uv: self.uv[i],
-            material: self.material[i],
-            throughput: self.throughput[i],
-            path: self.path[i],
-            depth: self.depth[i],
-            instance: self.instance[i],
-            distance: self.distance[i],
-            pdf: self.pdf[i],
-            uv_density: self.uv_density[i],
-            cone: self.cone[i],
-        }
+    pub fn push(&mut self, i: u32) {
+        self.ray.push(i);
     }
 }
 
-soa_queue!(
-    HitQueue,
-    "hits",
-    path,
-    [
-        direction,
-        point,
-        geometric_normal,
-        shading_normal,
-        uv,
-        material,
-        throughput,
-        path,
-        instance,
-        distance,
-        pdf,
-        depth,
-        uv_density,
-        cone
-    ]
-);
+soa_queue!(RayIndexQueue, "rays", ray, [ray]);
+
+/// Hits on one material class: indices of the rays that found them.
+pub type HitQueue = RayIndexQueue;
 
 /// Rays that left the scene: they bring back the background or the
 /// environment.
-#[derive(Clone, Debug, Default)]
-pub struct EscapedQueue {
-    /// Path throughputs.
-    pub throughput: Vec<Color>,
-    /// Path indices.
-    pub path: Vec<u32>,
-    /// Directions (unit), where the environment is looked up; empty when
-    /// the scene has no environment (then nothing reads them).
-    pub direction: Vec<Vec3A>,
-    /// Direction densities (path tracing; see [`RayItem::pdf`]), for
-    /// multiple importance sampling of the environment; empty like
-    /// `direction`.
-    pub pdf: Vec<f32>,
-}
-
-impl EscapedQueue {
-    /// Appends an escaped ray of a scene without an environment (it
-    /// brings back the constant background).
-    #[inline(always)]
-    pub fn push(&mut self, path: u32, throughput: Color) {
-        debug_assert!(throughput.is_finite());
-        self.throughput.push(throughput);
-        self.path.push(path);
-    }
-
-    /// Appends an escaped ray with the direction and density the
-    /// environment is looked up and weighted with.
-    #[inline(always)]
-    pub fn push_toward(&mut self, path: u32, throughput: Color, direction: Vec3A, pdf: f32) {
-        self.push(path, throughput);
-        self.direction.push(direction);
-        self.pdf.push(pdf);
-    }
-}
-
-soa_queue!(
-    EscapedQueue,
-    "escaped rays",
-    path,
-    [throughput, path, direction, pdf]
-);
-
-/// Rays of a scene with participating media after their closest-hit
-/// test, waiting to be followed through the media (path transport): the
-/// ray and what it hit, if anything.
-#[derive(Clone, Debug, Default)]
-pub struct MediumQueue {
-    /// The rays.
-    pub rays: RayQueue,
-    /// Their closest hits (`None`: escaped).
-    pub hits: Vec<Option<Hit>>,
-}
-
-impl MediumQueue {
-    /// Appends a ray and its closest hit.
-    #[inline]
-    pub fn push(&mut self, ray: RayItem, hit: Option<Hit>) {
-        self.rays.push(ray);
-        self.hits.push(hit);
-    }
-
-    /// Number of rays.
-    pub fn len(&self) -> usize {
-        self.hits.len()
-    }
-
-    /// True when no ray is queued.
-    pub fn is_empty(&self) -> bool {
-        self.hits.is_empty()
-    }
-
-    /// Removes every ray, keeping the buffers.
-    pub fn clear(&mut self) {
-        self.rays.clear();
-        self.hits.clear();
-    }
-
-    /// Appends every ray of `other`, in order.
-    pub fn append(&mut self, other: &MediumQueue) {
-        self.rays.append(&other.rays);
-        self.hits.extend_from_slice(&other.hits);
-    }
-}
-
-impl QueueBytes for MediumQueue {
-    fn bytes(&self) -> usize {
-        self.rays.bytes() + vec_bytes(&self.hits)
-    }
-}
+pub type EscapedQueue = RayIndexQueue;
 
 /// A shadow ray and what it adds to its path if nothing blocks it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -555,6 +450,37 @@ mod tests {
         q.clear();
         assert!(q.is_empty());
         assert_eq!(q.bytes(), bytes, "clearing keeps the allocation");
+    }
+
+    /// Rays made in parallel chunks land where sequential pushes put
+    /// them, whatever the thread count.
+    #[test]
+    fn rays_filled_in_parallel_equal_rays_pushed_in_order() {
+        let item = |i: usize| RayItem {
+            ray: Ray::new(Vec3A::new(i as f32, 0.5, -1.0), Vec3A::Y),
+            throughput: Color::new(1.0, 0.5, i as f32),
+            path: i as u32,
+            depth: (i % 5) as u32,
+            pdf: 0.25 * i as f32,
+            cone: RayCone::NONE,
+        };
+        let n = 3 * CHUNK + 5;
+        let mut pushed = RayQueue::default();
+        for i in 0..n {
+            pushed.push(item(i));
+        }
+        for threads in [1, 2, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut filled = RayQueue::default();
+            // A longer queue first: filling replaces it.
+            filled.push(item(7));
+            pool.install(|| filled.fill_with(n, item));
+            assert_eq!(filled.len(), n);
+            assert!((0..n).all(|i| filled.get(i) == pushed.get(i)), "{threads}");
+        }
     }
 
     #[test]

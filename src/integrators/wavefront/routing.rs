@@ -4,24 +4,23 @@
 //! here, as pbrt-v4's `EnqueueWorkAfterMiss` and
 //! `EnqueueWorkAfterIntersection` make them:
 //!
-//! * after the closest-hit test ([`RoutedChunk::route`]), a ray that
-//!   missed goes to the escaped queue, a ray that hit goes to the hit queue
-//!   of its material's class;
+//! * after the closest-hit test ([`route_rays`]), a ray that missed goes
+//!   to the escaped queue, a ray that hit goes to the hit queue of its
+//!   material's class; both queues hold the ray's index only;
 //! * after shading ([`ShadeOutput`]), emission goes to the path's
 //!   radiance, shadow rays to the shadow queue, and reflection and
 //!   refraction rays to the next bounce's ray queue, every chunk's
 //!   reflections before every chunk's refractions.
 //!
-//! Stages route into per-chunk buffers (see
-//! [`drain`](crate::integrators::wavefront::drain)); [`join_routed`] and
-//! [`join_shade_outputs`] append them to the stage's output in chunk
-//! order.
+//! Shading stages route into per-chunk buffers (see
+//! [`drain`](crate::integrators::wavefront::drain)); [`join_shade_outputs`]
+//! appends them to the stage's output in chunk order.
 
 use crate::core::math::Color;
 use crate::integrators::counters::RayCounts;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, MediumQueue, QueueBytes, RayItem, RayQueue, ShadowItem,
-    ShadowQueue, ShadowSegments,
+    EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
+    ShadowSegments,
 };
 use crate::scene::Hit;
 use crate::scene::material::MaterialClass;
@@ -31,117 +30,27 @@ use crate::transport::interaction::{RayKind, ShadowQuery};
 pub trait ClassHitQueues {
     /// The hit queue of `class`.
     fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue;
+
+    /// Every class's hit queue, indexed by `class as usize`.
+    fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()];
 }
 
-/// One chunk's hit queues, one per material class, indexed by
-/// `class as usize`.
-#[derive(Clone, Debug, Default)]
-struct ClassQueues([HitQueue; MaterialClass::ALL.len()]);
-
-/// One chunk of rays routed after the closest-hit test.
-#[derive(Clone, Debug, Default)]
-pub struct RoutedChunk {
-    escaped: EscapedQueue,
-    hits: ClassQueues,
-    media: MediumQueue,
-}
-
-impl RoutedChunk {
-    /// Removes every routed ray, keeping the buffers.
-    pub fn clear(&mut self) {
-        self.escaped.clear();
-        for q in &mut self.hits.0 {
-            q.clear();
-        }
-        self.media.clear();
-    }
-
-    /// Routes ray `i` of `rays` after its closest-hit test: a miss to the
-    /// escaped queue (with its direction and density when
-    /// `environment`: only an environment reads them), a hit to the queue
-    /// of its material's class (`classes` holds the class of each
-    /// material).
-    #[inline]
-    pub fn route(
-        &mut self,
-        classes: &[MaterialClass],
-        environment: bool,
-        rays: &RayQueue,
-        i: usize,
-        found: Option<Hit>,
-    ) {
-        match found {
-            None if environment => self.escaped.push_toward(
-                rays.path[i],
-                rays.throughput[i],
-                rays.direction[i],
-                rays.pdf[i],
-            ),
-            None => self.escaped.push(rays.path[i], rays.throughput[i]),
-            Some(h) => {
-                let class = classes[h.material as usize];
-                self.hits.0[class as usize].push(HitItem::new(&h, &rays.get(i)));
-            }
-        }
-    }
-
-    /// Routes ray `i` of `rays` of a scene with media under path
-    /// transport: every ray, hit or not, goes to the medium queue, to be
-    /// followed through the media before anything else.
-    #[inline]
-    pub fn route_to_media(&mut self, rays: &RayQueue, i: usize, found: Option<Hit>) {
-        self.media.push(rays.get(i), found);
-    }
-
-    /// Routes what a ray of a scene with media ended on after it was
-    /// followed through the media: `hit` (with `hit.t` the whole segment's
-    /// length) of a ray in direction `item.ray.direction` to the queue of
-    /// its material's class, or an escape in that direction to the escaped
-    /// queue (with direction and density when `environment`).
-    #[inline]
-    pub fn route_after_media(
-        &mut self,
-        classes: &[MaterialClass],
-        environment: bool,
-        item: &RayItem,
-        hit: Option<Hit>,
-    ) {
-        match hit {
-            None if environment => {
-                self.escaped
-                    .push_toward(item.path, item.throughput, item.ray.direction, item.pdf)
-            }
-            None => self.escaped.push(item.path, item.throughput),
-            Some(h) => {
-                let class = classes[h.material as usize];
-                self.hits.0[class as usize].push(HitItem::new(&h, item));
-            }
-        }
-    }
-
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.escaped.bytes()
-            + self.hits.0.iter().map(|q| q.bytes()).sum::<usize>()
-            + self.media.bytes()
-    }
-}
-
-/// Appends routed chunks to the escaped queue and the hit queues, in
-/// chunk order.
-pub fn join_routed<'a>(
-    chunks: impl IntoIterator<Item = &'a RoutedChunk>,
+/// Routes every ray of the bounce after its closest-hit test, in ray
+/// order: ray `i`, whose closest hit is `found[i]`, goes to `escaped` on
+/// a miss, else to the hit queue of its material's class (`classes`
+/// holds the class of each material). Each queue receives ascending ray
+/// indices.
+pub fn route_rays(
+    classes: &[MaterialClass],
+    found: &[Option<Hit>],
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
-    media: &mut MediumQueue,
 ) {
-    for chunk in chunks {
-        escaped.append(&chunk.escaped);
-        for class in MaterialClass::ALL {
-            hits.queue_mut(class).append(&chunk.hits.0[class as usize]);
-        }
-        if !chunk.media.is_empty() {
-            media.append(&chunk.media);
+    let queues = hits.all_mut();
+    for (i, f) in found.iter().enumerate() {
+        match f {
+            None => escaped.push(i as u32),
+            Some(h) => queues[classes[h.material as usize] as usize].push(i as u32),
         }
     }
 }
@@ -198,8 +107,9 @@ impl ShadeOutput {
         });
     }
 
-    /// Adds `n` rays traced inside a stage (boundary crossings, as
-    /// refraction rays; shadow rays of point lights in media).
+    /// Adds rays traced inside a stage: `crossings` boundary crossings
+    /// (counted as refraction rays) and `shadows` shadow rays (of point
+    /// lights in media).
     #[inline]
     pub fn count_rays(&mut self, crossings: u64, shadows: u64) {
         self.counts.refraction += crossings;
@@ -270,5 +180,76 @@ pub fn join_shade_outputs<T: std::borrow::BorrowMut<ShadeOutput>>(
     }
     for out in outputs.iter() {
         to.next.append(&out.borrow().refractions);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3A};
+
+    use super::*;
+
+    /// Hit queues indexed by class, as the ECS side keeps them.
+    #[derive(Default)]
+    struct Queues([HitQueue; MaterialClass::ALL.len()]);
+
+    impl ClassHitQueues for Queues {
+        fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue {
+            &mut self.0[class as usize]
+        }
+
+        fn all_mut(&mut self) -> [&mut HitQueue; MaterialClass::ALL.len()] {
+            self.0.each_mut()
+        }
+    }
+
+    fn hit(material: u32) -> Hit {
+        Hit {
+            t: 1.0,
+            point: Vec3A::ZERO,
+            geometric_normal: Vec3A::Y,
+            shading_normal: Vec3A::Y,
+            uv: Vec2::ZERO,
+            uv_density: 0.0,
+            instance: 0,
+            material,
+        }
+    }
+
+    /// Every ray goes to exactly one queue: misses to the escaped queue,
+    /// hits to their material's class, each queue in ascending ray order
+    /// (the order shading then reads them in, which keeps the next
+    /// bounce's ray order, and so the image, what it was with copied hits).
+    #[test]
+    fn every_ray_is_routed_once_by_class_in_ray_order() {
+        let classes = [
+            MaterialClass::Diffuse,
+            MaterialClass::Glass,
+            MaterialClass::Diffuse,
+        ];
+        let found: Vec<Option<Hit>> = (0..1000u32)
+            .map(|i| (i % 7 != 3).then(|| hit(i % 3)))
+            .collect();
+        let mut escaped = EscapedQueue::default();
+        let mut queues = Queues::default();
+        route_rays(&classes, &found, &mut escaped, &mut queues);
+        let mut seen = vec![0u32; found.len()];
+        for &i in &escaped.ray {
+            assert!(found[i as usize].is_none());
+            seen[i as usize] += 1;
+        }
+        for class in MaterialClass::ALL {
+            let q = &queues.0[class as usize];
+            assert!(q.ray.windows(2).all(|w| w[0] < w[1]), "{class:?}");
+            for &i in &q.ray {
+                let m = found[i as usize].expect("a hit").material;
+                assert_eq!(classes[m as usize], class);
+                seen[i as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1));
+        assert_eq!(escaped.len(), (0..1000).filter(|i| i % 7 == 3).count());
+        assert!(queues.0[MaterialClass::Mirror as usize].is_empty());
+        assert!(!queues.0[MaterialClass::Glass as usize].is_empty());
     }
 }

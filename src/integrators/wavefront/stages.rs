@@ -6,7 +6,7 @@
 //! with [`drain`](crate::integrators::wavefront::drain) and leave where
 //! each result goes to [`routing`](crate::integrators::wavefront::routing).
 
-use glam::Vec3A;
+use rayon::prelude::*;
 
 use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, RayCone, max_component};
@@ -15,14 +15,16 @@ use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
+use crate::integrators::wavefront::CHUNK;
 use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, MediumQueue, RayItem, RayQueue, ShadowSegments,
+    ClosestHits, EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
 };
 use crate::integrators::wavefront::routing::{
-    ClassHitQueues, RoutedChunk, ShadeOutput, ShadeTargets, join_routed, join_shade_outputs,
+    ClassHitQueues, ShadeOutput, ShadeTargets, join_shade_outputs, route_rays,
 };
 use crate::integrators::{accumulate, camera_ray};
+use crate::scene::Hit;
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
@@ -33,10 +35,10 @@ use crate::transport::path::{self, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
-/// Stage: one camera ray per path of the batch `[first, first + count)`.
-/// Path `p` goes where `paths` says (sample `p % spp` of pixel `p / spp`
-/// for a whole image), with the same film position and sample keys as the
-/// recursive tracer.
+/// Stage: one camera ray per path of the batch `[first, first + count)`,
+/// made in parallel chunks. Path `p` goes where `paths` says (sample
+/// `p % spp` of pixel `p / spp` for a whole image), with the same film
+/// position and sample keys as the recursive tracer.
 pub fn generate_camera_rays(
     camera: &CameraRays,
     settings: &RenderSettings,
@@ -46,8 +48,7 @@ pub fn generate_camera_rays(
     out: &mut RayQueue,
     rays: &mut RayCounts,
 ) {
-    out.clear();
-    for local in 0..count {
+    out.fill_with(count, |local| {
         let k = paths.path(first + local as u64);
         let mut sampler = Sampler::with_kind(
             settings.sampler,
@@ -55,50 +56,33 @@ pub fn generate_camera_rays(
             k.pixel(settings.width),
             k.sample,
         );
-        let ray = camera_ray(camera, k.x, k.y, settings.spp, &mut sampler);
-        out.push(RayItem {
-            ray,
+        RayItem {
+            ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
             throughput: Color::ONE,
             path: local as u32,
             depth: 0,
             pdf: 0.0,
             cone: camera.cone(),
-        });
-    }
+        }
+    });
     rays.camera += count as u64;
 }
 
-/// One chunk's buffers of [`intersect_closest`]: its routed rays.
-#[derive(Debug, Default)]
-pub struct IntersectChunk {
-    routed: RoutedChunk,
-}
-
-impl IntersectChunk {
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.routed.bytes()
-    }
-}
-
-/// Per-chunk buffers of [`intersect_closest`], kept between calls.
-pub type RoutingScratch = Vec<IntersectChunk>;
-
-/// Stage: closest hit for every ray of `rays`, routed to `escaped` or to
-/// the hit queue of the material's class. Chunks are traced and routed in
-/// parallel into `scratch`, then appended in chunk order.
+/// Stage: closest hit for every ray of `rays`, written in place into
+/// `found` (chunks traced in parallel), then each ray routed by index to
+/// `escaped` or to the hit queue of the material's class.
 ///
-/// With `to_media` (a scene with media under path transport) every ray
-/// goes to `media` instead, to be followed through the media by
-/// [`sample_media`] first.
+/// Without `route` (a scene with media under path transport) the rays
+/// are left unrouted, to be followed through the media by
+/// [`sample_media`] first, which routes them.
 pub fn intersect_closest(
     scene: &RenderScene,
     classes: &[MaterialClass],
     rays: &RayQueue,
-    scratch: &mut RoutingScratch,
+    found: &mut ClosestHits,
     escaped: &mut EscapedQueue,
     hits: &mut impl ClassHitQueues,
-    (to_media, media): (bool, &mut MediumQueue),
+    route: bool,
 ) {
     // Eight neighbouring rays pointing into one octant go through the top
     // level and the meshes as one packet: coherent rays (camera rays,
@@ -107,32 +91,30 @@ pub fn intersect_closest(
     // are traced one at a time. Measured faster than mesh streams for
     // camera and for secondary rays since meshes have their own 8-wide
     // layout (README, "Measurement notes").
-    let environment = scene.environment().is_some();
-    let chunks = drain_queue(rays.len(), scratch, |range, chunk| {
-        let IntersectChunk { routed } = chunk;
-        routed.clear();
-        let mut found = [None; LANES];
-        for i in range.clone() {
-            let lane = (i - range.start) % LANES;
-            if lane == 0 {
-                let n = (range.end - i).min(LANES);
-                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(n - 1)));
-                if one_octant(&packet[..n]) {
-                    scene.intersect_packet_with(&packet[..n], &mut found, true);
+    let n = rays.len();
+    found.0.clear();
+    found.0.resize(n, None);
+    found
+        .0
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            for (k, lanes) in out.chunks_mut(LANES).enumerate() {
+                let i = c * CHUNK + k * LANES;
+                let m = lanes.len();
+                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(m - 1)));
+                if one_octant(&packet[..m]) {
+                    scene.intersect_packet_with(&packet[..m], lanes, true);
                 } else {
-                    for (f, r) in found.iter_mut().zip(&packet[..n]) {
+                    for (f, r) in lanes.iter_mut().zip(&packet[..m]) {
                         *f = scene.intersect(r, 0.0, f32::INFINITY);
                     }
                 }
             }
-            if to_media {
-                routed.route_to_media(rays, i, found[lane]);
-            } else {
-                routed.route(classes, environment, rays, i, found[lane]);
-            }
-        }
-    });
-    join_routed(chunks.iter().map(|c| &c.routed), escaped, hits, media);
+        });
+    if route {
+        route_rays(classes, &found.0, escaped, hits);
+    }
 }
 
 /// Whether all `rays` point into one octant: the packets worth tracing
@@ -148,10 +130,21 @@ fn one_octant(rays: &[Ray]) -> bool {
     rays.iter().all(|r| octant(r) == first)
 }
 
+/// How [`sample_media`] changed one ray: it now ends on `hit` (a surface)
+/// or escapes (`None`), with `ray` and `throughput` as the segment left
+/// them. Rays that scattered or were lost have no update.
+#[derive(Clone, Copy, Debug)]
+struct SegmentUpdate {
+    index: u32,
+    ray: Ray,
+    throughput: Color,
+    hit: Option<Hit>,
+}
+
 /// One chunk's buffers of [`sample_media`].
 #[derive(Debug, Default)]
 pub struct MediaChunk {
-    routed: RoutedChunk,
+    updates: Vec<SegmentUpdate>,
     shaded: ShadeOutput,
 }
 
@@ -170,7 +163,7 @@ impl std::borrow::BorrowMut<ShadeOutput> for MediaChunk {
 impl MediaChunk {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.routed.bytes() + self.shaded.bytes()
+        self.updates.capacity() * std::mem::size_of::<SegmentUpdate>() + self.shaded.bytes()
     }
 }
 
@@ -189,19 +182,15 @@ pub struct MediaTargets<'a> {
     pub shade: ShadeTargets<'a>,
 }
 
-impl ClassHitQueues for &mut dyn ClassHitQueues {
-    fn queue_mut(&mut self, class: MaterialClass) -> &mut HitQueue {
-        (**self).queue_mut(class)
-    }
-}
-
 /// Stage (path transport in a scene with media): follows every ray of
-/// `media` through the media with [`volume::propagate`], as the
-/// recursive tracer does. A segment that ends on a surface goes to its
-/// class's hit queue (weighted), an escape to the escaped queue; a
-/// scattering event adds its next-event shadow rays
-/// ([`volume::medium_next_event`]) and its next ray
-/// ([`volume::continue_in_medium`]). `first` is the batch's first path.
+/// the bounce through the media with [`volume::propagate`], as the
+/// recursive tracer does, starting from its closest hit in `found`. A
+/// segment that ends on a surface or escapes is written back in place
+/// (its ray, weighted throughput and end) and routed by index to its
+/// class's hit queue or to the escaped queue; a scattering event adds its
+/// next-event shadow rays ([`volume::medium_next_event`]) and its next
+/// ray ([`volume::continue_in_medium`]). `first` is the batch's first
+/// path.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_media(
     scene: &RenderScene,
@@ -209,23 +198,25 @@ pub fn sample_media(
     paths: &PathMap,
     first: u64,
     classes: &[MaterialClass],
-    media: &MediumQueue,
+    rays: &mut RayQueue,
+    found: &mut ClosestHits,
     scratch: &mut MediaScratch,
     to: MediaTargets<'_>,
 ) {
-    let environment = scene.environment().is_some();
-    let chunks = drain_queue(media.len(), scratch, |range, chunk| {
-        let MediaChunk { routed, shaded } = chunk;
-        routed.clear();
+    let rays_in: &RayQueue = rays;
+    let found_in: &ClosestHits = found;
+    let chunks = drain_queue(rays_in.len(), scratch, |range, chunk| {
+        let MediaChunk { updates, shaded } = chunk;
+        updates.clear();
         shaded.clear();
         for i in range {
-            let item = media.rays.get(i);
+            let item = rays_in.get(i);
             let (pixel, sample) = paths.sampler_keys(first + item.path as u64);
             let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
             let seg = volume::propagate(
                 scene,
                 &item.ray,
-                media.hits[i],
+                found_in.0[i],
                 item.depth,
                 item.throughput,
                 &mut sampler,
@@ -236,22 +227,18 @@ pub fn sample_media(
             }
             let throughput = item.throughput * seg.weight;
             match seg.end {
-                SegmentEnd::Surface { hit, ray } => {
-                    let at = RayItem {
-                        ray,
-                        throughput,
-                        ..item
-                    };
-                    routed.route_after_media(classes, environment, &at, Some(hit));
-                }
-                SegmentEnd::Escaped(d) => {
-                    let at = RayItem {
-                        ray: Ray::new(item.ray.origin, d),
-                        throughput,
-                        ..item
-                    };
-                    routed.route_after_media(classes, environment, &at, None);
-                }
+                SegmentEnd::Surface { hit, ray } => updates.push(SegmentUpdate {
+                    index: i as u32,
+                    ray,
+                    throughput,
+                    hit: Some(hit),
+                }),
+                SegmentEnd::Escaped(d) => updates.push(SegmentUpdate {
+                    index: i as u32,
+                    ray: Ray::new(item.ray.origin, d),
+                    throughput,
+                    hit: None,
+                }),
                 SegmentEnd::Lost => {}
                 SegmentEnd::Scattered(v) => {
                     volume::medium_next_event(scene, settings, &v, &mut sampler, item.depth, |q| {
@@ -280,15 +267,23 @@ pub fn sample_media(
     });
     let MediaTargets {
         escaped,
-        mut hits,
+        hits,
         shade,
     } = to;
-    join_routed(
-        chunks.iter().map(|c| &c.routed),
-        escaped,
-        &mut hits,
-        &mut MediumQueue::default(),
-    );
+    // Chunks in order, updates in ray order: every queue receives
+    // ascending indices, as `route_rays` gives them.
+    let queues = hits.all_mut();
+    for u in chunks.iter().flat_map(|c| &c.updates) {
+        let i = u.index as usize;
+        rays.origin[i] = u.ray.origin;
+        rays.direction[i] = u.ray.direction;
+        rays.throughput[i] = u.throughput;
+        found.0[i] = u.hit;
+        match u.hit {
+            None => escaped.push(u.index),
+            Some(h) => queues[classes[h.material as usize] as usize].push(u.index),
+        }
+    }
     join_shade_outputs(chunks, shade);
 }
 
@@ -298,6 +293,7 @@ pub fn sample_media(
 pub fn handle_escaped_rays(
     scene: &RenderScene,
     settings: &RenderSettings,
+    rays: &RayQueue,
     escaped: &EscapedQueue,
     radiance: &mut [Color],
 ) {
@@ -308,43 +304,64 @@ pub fn handle_escaped_rays(
         && let Some(fog) = scene.fog()
     {
         let tr = fog.transmittance(f32::INFINITY);
-        for i in 0..escaped.len() {
-            let l = scene.escaped_radiance(escaped.direction.get(i).copied().unwrap_or(Vec3A::Z));
-            radiance[escaped.path[i] as usize] += escaped.throughput[i] * (l * tr);
+        for &i in &escaped.ray {
+            let i = i as usize;
+            let l = scene.escaped_radiance(rays.direction[i]);
+            radiance[rays.path[i] as usize] += rays.throughput[i] * (l * tr);
         }
         return;
     }
     if scene.environment().is_none() {
         let background = scene.background();
-        for (&path, &t) in escaped.path.iter().zip(&escaped.throughput) {
-            radiance[path as usize] += t * background;
+        for &i in &escaped.ray {
+            let i = i as usize;
+            radiance[rays.path[i] as usize] += rays.throughput[i] * background;
         }
         return;
     }
-    for i in 0..escaped.len() {
-        let l = path::escaped(scene, settings, escaped.direction[i], escaped.pdf[i]);
-        radiance[escaped.path[i] as usize] += escaped.throughput[i] * l;
+    for &i in &escaped.ray {
+        let i = i as usize;
+        let l = path::escaped(scene, settings, rays.direction[i], rays.pdf[i]);
+        radiance[rays.path[i] as usize] += rays.throughput[i] * l;
     }
 }
 
 /// Per-chunk buffers of the shading stages.
 pub type ShadeScratch = Vec<ShadeOutput>;
 
-/// Runs `kernel` on every hit of `hits` with its interaction, in parallel
-/// chunks each writing its own [`ShadeOutput`], then joins the outputs in
-/// chunk order.
+/// What a shading stage reads: the bounce's rays, their closest hits and
+/// the hit queue of the class it shades (indices into both).
+#[derive(Clone, Copy)]
+pub struct ShadeInput<'a> {
+    /// Rays of the bounce.
+    pub rays: &'a RayQueue,
+    /// Their closest hits.
+    pub found: &'a ClosestHits,
+    /// The rays whose hits this stage shades.
+    pub hits: &'a HitQueue,
+}
+
+/// Runs `kernel` on every hit of `input.hits` with its interaction, in
+/// parallel chunks each writing its own [`ShadeOutput`], then joins the
+/// outputs in chunk order.
 fn shade_hits(
     scene: &RenderScene,
     settings: &RenderSettings,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
     kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
 ) {
+    let ShadeInput { rays, found, hits } = input;
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
-        for i in range {
-            let mut h = hits.get(i);
+        for &i in &hits.ray[range] {
+            let i = i as usize;
+            let Some(hit) = &found.0[i] else {
+                debug_assert!(false, "ray {i} is queued for shading without a hit");
+                continue;
+            };
+            let mut h = HitItem::new(hit, &rays.get(i));
             let it =
                 Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
             // A segment that ran through an absorbing interior carries its
@@ -396,11 +413,11 @@ fn whitted_media_transmittance(
 pub fn shade<const LIT: bool, const SCATTER: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, settings, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         if it.surface.emission != Color::ZERO {
             out.emit(h.path, h.throughput * it.surface.emission);
         }
@@ -446,11 +463,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
     settings: &RenderSettings,
     paths: &PathMap,
     first: u64,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    shade_hits(scene, settings, hits, scratch, to, |h, it, out| {
+    shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
             out.emit(h.path, h.throughput * e);
@@ -503,7 +520,7 @@ pub fn shade_class(
     settings: &RenderSettings,
     paths: &PathMap,
     first: u64,
-    hits: &HitQueue,
+    input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
@@ -515,7 +532,7 @@ pub fn shade_class(
             // Every lit class also scatters diffusely under path transport.
             (true, _) => shade_path::<true, true>,
         };
-        return f(scene, settings, paths, first, hits, scratch, to);
+        return f(scene, settings, paths, first, input, scratch, to);
     }
     let f = match lobes {
         (false, false) => shade::<false, false>,
@@ -523,7 +540,7 @@ pub fn shade_class(
         (true, false) => shade::<true, false>,
         (true, true) => shade::<true, true>,
     };
-    f(scene, settings, hits, scratch, to)
+    f(scene, settings, input, scratch, to)
 }
 
 /// Reusable buffers of [`trace_shadow_rays`].
