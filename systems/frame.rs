@@ -82,7 +82,8 @@ pub struct SceneAccel {
 /// Progressive accumulation: while nothing changes (scene, camera,
 /// settings), each frame adds `spp` samples per pixel to the previous
 /// ones, and frame `k` is bit for bit the image of `k * spp` samples (see
-/// [`crate::integrators::progressive`]). Any change starts again from `spp` samples.
+/// [`crate::integrators::progressive`]). Any change (fog included) starts
+/// again from `spp` samples.
 /// Applies to the recursive integrator (Whitted or path transport); the
 /// wavefront renders each frame independently.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -91,12 +92,22 @@ pub struct ProgressiveRendering {
     pub enabled: bool,
 }
 
+/// What progressive sums were rendered with besides the scene: settings,
+/// camera, background, environment and fog.
+pub(super) type AccumulationKey = (
+    RenderSettings,
+    Camera,
+    Color,
+    Option<Environment>,
+    Option<crate::core::medium::Medium>,
+);
+
 /// The running sums of progressive rendering and what they were rendered
 /// with.
 #[derive(Resource, Default)]
 pub struct AccumulationState {
     pub(super) accumulator: Accumulator,
-    pub(super) key: Option<(RenderSettings, Camera, Color, Option<Environment>)>,
+    pub(super) key: Option<AccumulationKey>,
 }
 
 /// The finished frame.

@@ -1,5 +1,5 @@
 //! Light-field capture: one world, one BVH, one frame per grid camera of
-//! a [`Rig`](crate::lightfield::Rig).
+//! a [`Rig`].
 //!
 //! The scene is spawned once; between frames only the camera component
 //! changes, so the sync systems find nothing to update and the top-level

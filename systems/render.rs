@@ -139,7 +139,7 @@ fn render_photon(world: &mut World, scene: &RenderScene, camera: &Camera, config
 
 /// Adds `spp` samples to the running sums, after starting them again if
 /// anything changed: the scene (this frame's update), the camera, the
-/// settings, the background or the environment.
+/// settings, the background, the environment or the fog.
 fn render_progressive(
     world: &mut World,
     scene: &RenderScene,
@@ -152,13 +152,14 @@ fn render_progressive(
         camera,
         config.background,
         config.environment.clone(),
+        config.fog,
     );
     let mut state = world.resource_mut::<AccumulationState>();
     if changed || state.key.as_ref() != Some(&key) {
         state.accumulator = Accumulator::new(config.settings.width, config.settings.height);
         state.key = Some(key);
     }
-    let (settings, camera, _, _) = state.key.clone().expect("just set");
+    let (settings, camera, ..) = state.key.clone().expect("just set");
     let start = Instant::now();
     let counters = state.accumulator.add_samples(scene, &camera, &settings);
     let film = state.accumulator.film();

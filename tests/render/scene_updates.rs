@@ -336,13 +336,14 @@ fn random_updates_match_scratch_with_reinsertion_and_no_rebuilds() {
 
 /// Renders `world`'s scene once, from scratch, with `spp` samples.
 fn reference_film(world: &mut World, spp: u32) -> prism::image::film::Film {
-    let (scene, _) = scene_from_scratch(
+    let (mut scene, _) = scene_from_scratch(
         world,
         world.resource::<Frame>().update.origin,
         Color::ZERO,
         BuildQuality::Medium,
     )
     .unwrap();
+    scene.set_fog(world.resource::<RenderConfig>().fog);
     let mut settings = world.resource::<RenderConfig>().settings.clone();
     settings.spp = spp;
     let mut q = world.query::<&Camera>();
@@ -444,6 +445,21 @@ fn progressive_frames_equal_renders_of_all_their_samples() {
         world.resource_mut::<RenderConfig>().settings.seed = 9;
         run_frame(&mut world, &mut schedule);
         assert_eq!(world.resource::<Frame>().samples, spp);
+        // A fog appears (path transport renders it; Whitted attenuates).
+        run_frame(&mut world, &mut schedule);
+        assert_eq!(world.resource::<Frame>().samples, 2 * spp);
+        world.resource_mut::<RenderConfig>().fog = Some(
+            prism::core::medium::Medium::checked(Color::splat(0.05), Color::splat(0.2), 0.0)
+                .unwrap(),
+        );
+        run_frame(&mut world, &mut schedule);
+        assert_eq!(world.resource::<Frame>().samples, spp, "after the fog");
+        let film = world.resource::<Frame>().film.clone().unwrap();
+        assert_eq!(
+            film,
+            reference_film(&mut world, spp),
+            "spp {spp} after the fog"
+        );
         // Turned off: plain frames of spp samples.
         world.resource_mut::<ProgressiveRendering>().enabled = false;
         run_frame(&mut world, &mut schedule);
