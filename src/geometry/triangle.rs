@@ -477,7 +477,7 @@ impl WatertightRay {
     /// The lanes whose edge test passed or needs the re-check, in lane
     /// order (`corners(l)`: lane `l`'s triangle): the nearest hit inside
     /// `(t_min, t_max)`, which shrinks to each hit found.
-    #[inline(never)]
+    #[inline(always)]
     fn finish<const N: usize>(
         &self,
         corners: impl Fn(usize) -> [Vec3A; 3],
