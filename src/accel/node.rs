@@ -171,25 +171,33 @@ impl NodeRay {
     }
 
     /// [`Self::test`] in one 8-wide AVX register.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
+    /// `#[target_feature]` of its own, so that it is inlined into the AVX2
+    /// entry point with its intrinsics (see [`crate::accel::simd`]).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn test_avx2(&self, node: &Node8, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
-        use std::arch::x86_64::*;
-        let mut enter = _mm256_set1_ps(t_min);
-        let mut exit = _mm256_set1_ps(t_max);
-        for a in 0..3 {
-            let near: __m256 = bytemuck::cast(node.planes[self.near[a] as usize]);
-            let far: __m256 = bytemuck::cast(node.planes[self.far[a] as usize]);
-            let inv = _mm256_set1_ps(self.inv[a]);
-            let tn = _mm256_mul_ps(_mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a])), inv);
-            let tf = _mm256_mul_ps(_mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a])), inv);
-            // max(a, b) = a > b ? a : b, as `max_keep`.
-            enter = _mm256_max_ps(tn, enter);
-            exit = _mm256_min_ps(tf, exit);
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn test_avx2(&self, node: &Node8, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+        unsafe {
+            use std::arch::x86_64::*;
+            let mut enter = _mm256_set1_ps(t_min);
+            let mut exit = _mm256_set1_ps(t_max);
+            for a in 0..3 {
+                let near: __m256 = bytemuck::cast(node.planes[self.near[a] as usize]);
+                let far: __m256 = bytemuck::cast(node.planes[self.far[a] as usize]);
+                let inv = _mm256_set1_ps(self.inv[a]);
+                let tn = _mm256_mul_ps(_mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a])), inv);
+                let tf = _mm256_mul_ps(_mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a])), inv);
+                // max(a, b) = a > b ? a : b, as `max_keep`.
+                enter = _mm256_max_ps(tn, enter);
+                exit = _mm256_min_ps(tf, exit);
+            }
+            let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
+            (mask, bytemuck::cast(enter))
         }
-        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
-        (mask, bytemuck::cast(enter))
     }
 }
 

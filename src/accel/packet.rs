@@ -114,11 +114,19 @@ pub fn traverse<const AVX: bool>(
     let node_rays: [NodeRay; LANES] = std::array::from_fn(|l| NodeRay::new(&packet.rays[l], bvh));
     let octant = node_rays[alive.trailing_zeros() as usize].octant;
     let mut mixed = false;
-    for_each_lane(alive, |l| mixed |= node_rays[l].octant != octant);
+    for_each_lane(
+        alive,
+        #[inline(always)]
+        |l| mixed |= node_rays[l].octant != octant,
+    );
     if mixed {
-        for_each_lane(alive, |l| {
-            single_lane::<AVX>(bvh, 0, &node_rays[l], packet, l, &mut leaf);
-        });
+        for_each_lane(
+            alive,
+            #[inline(always)]
+            |l| {
+                single_lane::<AVX>(bvh, 0, &node_rays[l], packet, l, &mut leaf);
+            },
+        );
         return;
     }
     let mut lanes = Lanes {
@@ -168,11 +176,15 @@ pub fn traverse<const AVX: bool>(
             continue;
         }
         if go.count_ones() <= DIVERGED {
-            for_each_lane(go, |l| {
-                if single_lane::<AVX>(bvh, cur, &node_rays[l], packet, l, &mut leaf) {
-                    alive &= !(1 << l);
-                }
-            });
+            for_each_lane(
+                go,
+                #[inline(always)]
+                |l| {
+                    if single_lane::<AVX>(bvh, cur, &node_rays[l], packet, l, &mut leaf) {
+                        alive &= !(1 << l);
+                    }
+                },
+            );
             if alive == 0 {
                 return;
             }
@@ -264,57 +276,69 @@ fn test_child<const AVX: bool>(
     }
     let e = [enter[0].to_array(), enter[1].to_array()];
     let mut t = f32::INFINITY;
-    for_each_lane(hit, |l| t = min_keep(e[l / 4][l % 4], t));
+    for_each_lane(
+        hit,
+        #[inline(always)]
+        |l| t = min_keep(e[l / 4][l % 4], t),
+    );
     (hit, t)
 }
 
 /// [`test_child`] in one 8-wide AVX register.
+///
+/// # Safety
+/// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
+/// `#[target_feature]` of its own, so that it is inlined into the AVX2
+/// entry point with its intrinsics (see [`crate::accel::simd`]).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn test_child_avx2(
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn test_child_avx2(
     lanes: &Lanes,
     node: &Node8,
     c: usize,
     packet: &Packet,
     go: LaneMask,
 ) -> (LaneMask, f32) {
-    use std::arch::x86_64::*;
-    let mut enter: __m256 = bytemuck::cast(packet.t_min);
-    let mut exit: __m256 = bytemuck::cast(packet.t_max);
-    for a in 0..3 {
-        let n = lanes.near[a];
-        let near = _mm256_set1_ps(node.planes[n][c]);
-        let far = _mm256_set1_ps(node.planes[(n + 3) % 6][c]);
-        let on: __m256 = bytemuck::cast(lanes.o_near[a]);
-        let of: __m256 = bytemuck::cast(lanes.o_far[a]);
-        let inv: __m256 = bytemuck::cast(lanes.inv[a]);
-        enter = _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(near, on), inv), enter);
-        exit = _mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(far, of), inv), exit);
+    // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+    unsafe {
+        use std::arch::x86_64::*;
+        let mut enter: __m256 = bytemuck::cast(packet.t_min);
+        let mut exit: __m256 = bytemuck::cast(packet.t_max);
+        for a in 0..3 {
+            let n = lanes.near[a];
+            let near = _mm256_set1_ps(node.planes[n][c]);
+            let far = _mm256_set1_ps(node.planes[(n + 3) % 6][c]);
+            let on: __m256 = bytemuck::cast(lanes.o_near[a]);
+            let of: __m256 = bytemuck::cast(lanes.o_far[a]);
+            let inv: __m256 = bytemuck::cast(lanes.inv[a]);
+            enter = _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(near, on), inv), enter);
+            exit = _mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(far, of), inv), exit);
+        }
+        let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit);
+        let hit = _mm256_movemask_ps(inside) as u32 & go;
+        if hit == 0 {
+            return (0, f32::INFINITY);
+        }
+        // The smallest entry of the lanes in `hit`, others as +inf: entries
+        // are never NaN (`maxps` keeps `t_min` over a NaN slab), so the order
+        // of the minima does not matter and this equals the lane loop of the
+        // portable path.
+        let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let keep = _mm256_cmpeq_epi32(
+            _mm256_and_si256(_mm256_set1_epi32(hit as i32), lane_bits),
+            lane_bits,
+        );
+        let e = _mm256_blendv_ps(
+            _mm256_set1_ps(f32::INFINITY),
+            enter,
+            _mm256_castsi256_ps(keep),
+        );
+        let m = _mm_min_ps(_mm256_castps256_ps128(e), _mm256_extractf128_ps::<1>(e));
+        let m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+        let m = _mm_min_ss(m, _mm_shuffle_ps::<0b01>(m, m));
+        (hit, _mm_cvtss_f32(m))
     }
-    let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit);
-    let hit = _mm256_movemask_ps(inside) as u32 & go;
-    if hit == 0 {
-        return (0, f32::INFINITY);
-    }
-    // The smallest entry of the lanes in `hit`, others as +inf: entries
-    // are never NaN (`maxps` keeps `t_min` over a NaN slab), so the order
-    // of the minima does not matter and this equals the lane loop of the
-    // portable path.
-    let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-    let keep = _mm256_cmpeq_epi32(
-        _mm256_and_si256(_mm256_set1_epi32(hit as i32), lane_bits),
-        lane_bits,
-    );
-    let e = _mm256_blendv_ps(
-        _mm256_set1_ps(f32::INFINITY),
-        enter,
-        _mm256_castsi256_ps(keep),
-    );
-    let m = _mm_min_ps(_mm256_castps256_ps128(e), _mm256_extractf128_ps::<1>(e));
-    let m = _mm_min_ps(m, _mm_movehl_ps(m, m));
-    let m = _mm_min_ss(m, _mm_shuffle_ps::<0b01>(m, m));
-    (hit, _mm_cvtss_f32(m))
 }
 
 /// Lane `l` alone through the subtree at `start`; returns whether it was
@@ -330,15 +354,24 @@ fn single_lane<const AVX: bool>(
 ) -> bool {
     let mut retired = false;
     let (t_min, t_max) = (packet.t_min[l], packet.t_max[l]);
-    traverse_from::<AVX>(bvh, start, ray, t_min, t_max, false, |leaf_index, _| {
-        let before = packet.t_max[l];
-        if leaf(packet, 1 << l, leaf_index) != 0 {
-            retired = true;
-            // Nothing is nearer than this: the traversal ends.
-            return Some(f32::NEG_INFINITY);
-        }
-        (packet.t_max[l] < before).then_some(packet.t_max[l])
-    });
+    traverse_from::<AVX>(
+        bvh,
+        start,
+        ray,
+        t_min,
+        t_max,
+        false,
+        #[inline(always)]
+        |leaf_index, _| {
+            let before = packet.t_max[l];
+            if leaf(packet, 1 << l, leaf_index) != 0 {
+                retired = true;
+                // Nothing is nearer than this: the traversal ends.
+                return Some(f32::NEG_INFINITY);
+            }
+            (packet.t_max[l] < before).then_some(packet.t_max[l])
+        },
+    );
     retired
 }
 

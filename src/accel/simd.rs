@@ -6,7 +6,16 @@
 //! a portable one (SSE2 on x86-64, whatever the target has elsewhere) and,
 //! on x86-64, one compiled with `#[target_feature(enable = "avx2,fma")]`
 //! into which the same kernels are inlined, so the compiler widens the
-//! loops to 256-bit registers. Which one runs is decided by
+//! loops to 256-bit registers. For that, everything a query runs must be
+//! inlined into its entry point: the leaf and per-lane closures passed to
+//! the traversals are `#[inline(always)]` closures, and the AVX2 helpers
+//! (the node test, the packet child test, the eight-triangle edge test)
+//! are `#[inline(always)]` functions without a `#[target_feature]` of
+//! their own, whose intrinsics are inlined once they sit inside the entry
+//! point. (A helper left out of line in code compiled without AVX2 would
+//! call every intrinsic as a function: correct but several times slower.
+//! `objdump -d` of a release build should show no call to a
+//! `core_arch` function from Prism's code.) Which one runs is decided by
 //! [`active`]: the CPU's features, detected once, unless a test or a
 //! benchmark [`force`]s one.
 //!
@@ -57,8 +66,24 @@ pub fn supported(isa: Isa) -> bool {
     }
 }
 
-/// The fastest path this CPU runs.
+/// Environment variable that overrides the choice of path: `portable` or
+/// `avx2` (the latter only where the CPU has it). For tools that cannot
+/// run every AVX2 instruction the compiler emits: Valgrind 3.19 stops at a
+/// VEX `vmovq` between registers in the AVX2 entry points, so callgrind
+/// runs set `PRISM_ISA=portable` (and compare portable with portable).
+pub const ISA_ENV: &str = "PRISM_ISA";
+
+/// The fastest path this CPU runs, or the one [`ISA_ENV`] names.
 pub fn detected() -> Isa {
+    if let Ok(v) = std::env::var(ISA_ENV) {
+        match v.as_str() {
+            "portable" => return Isa::Portable,
+            "avx2" if supported(Isa::Avx2) => return Isa::Avx2,
+            _ => eprintln!(
+                "notice: {ISA_ENV}={v:?} ignored (expected \"portable\", or \"avx2\" on a CPU with AVX2 and FMA)"
+            ),
+        }
+    }
     if supported(Isa::Avx2) {
         Isa::Avx2
     } else {

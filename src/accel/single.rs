@@ -286,20 +286,28 @@ pub fn traverse_bvh<const AVX: bool>(
     any_hit: bool,
     mut visit: impl FnMut(usize, f32) -> Option<f32>,
 ) -> bool {
-    traverse::<AVX>(bvh, ray, t_min, t_max, any_hit, |leaf, mut t_max| {
-        let l = bvh.leaves[leaf as usize];
-        let mut best = None;
-        for slot in l.first..l.first + l.count {
-            if let Some(t) = visit(slot as usize, t_max) {
-                if any_hit {
-                    return Some(t);
+    traverse::<AVX>(
+        bvh,
+        ray,
+        t_min,
+        t_max,
+        any_hit,
+        #[inline(always)]
+        |leaf, mut t_max| {
+            let l = bvh.leaves[leaf as usize];
+            let mut best = None;
+            for slot in l.first..l.first + l.count {
+                if let Some(t) = visit(slot as usize, t_max) {
+                    if any_hit {
+                        return Some(t);
+                    }
+                    t_max = t_max.min(t);
+                    best = Some(t_max);
                 }
-                t_max = t_max.min(t);
-                best = Some(t_max);
             }
-        }
-        best
-    })
+            best
+        },
+    )
 }
 
 #[cfg(test)]

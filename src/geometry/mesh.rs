@@ -463,6 +463,7 @@ impl Mesh {
                     t_min,
                     t_max,
                     false,
+                    #[inline(always)]
                     |leaf, t_max| {
                         let hit =
                             self.leaf_hit::<AVX>(&wt, leaf, t_min, Self::reach(t_max, &best))?;
@@ -501,30 +502,46 @@ impl Mesh {
         best: &mut [Option<MeshHit>; LANES],
     ) {
         if !matches!(self.structure, Structure::Bvh) {
-            for_each_lane(lanes, |l| {
-                if let Some(h) =
-                    self.intersect_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l])
-                {
-                    packet.t_max[l] = h.t;
-                    best[l] = Some(h);
-                }
-            });
+            for_each_lane(
+                lanes,
+                #[inline(always)]
+                |l| {
+                    if let Some(h) = self.intersect_kernel::<AVX>(
+                        &packet.rays[l],
+                        packet.t_min[l],
+                        packet.t_max[l],
+                    ) {
+                        packet.t_max[l] = h.t;
+                        best[l] = Some(h);
+                    }
+                },
+            );
             return;
         }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
-        crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
-            for_each_lane(hit, |l| {
-                let reach = Self::reach(p.t_max[l], &best[l]);
-                if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
-                    && self.wins(h.t, h.triangle, &best[l])
-                {
-                    p.t_max[l] = h.t;
-                    best[l] = Some(h);
-                }
-            });
-            0
-        });
+        crate::accel::packet::traverse::<AVX>(
+            &self.bvh,
+            packet,
+            lanes,
+            #[inline(always)]
+            |p, hit, leaf| {
+                for_each_lane(
+                    hit,
+                    #[inline(always)]
+                    |l| {
+                        let reach = Self::reach(p.t_max[l], &best[l]);
+                        if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
+                            && self.wins(h.t, h.triangle, &best[l])
+                        {
+                            p.t_max[l] = h.t;
+                            best[l] = Some(h);
+                        }
+                    },
+                );
+                0
+            },
+        );
     }
 
     /// The lanes of `packet` in `lanes` that hit any triangle within their
@@ -537,29 +554,47 @@ impl Mesh {
     ) -> LaneMask {
         if !matches!(self.structure, Structure::Bvh) {
             let mut blocked = 0;
-            for_each_lane(lanes, |l| {
-                if self.occluded_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l]) {
-                    blocked |= 1 << l;
-                }
-            });
+            for_each_lane(
+                lanes,
+                #[inline(always)]
+                |l| {
+                    if self.occluded_kernel::<AVX>(
+                        &packet.rays[l],
+                        packet.t_min[l],
+                        packet.t_max[l],
+                    ) {
+                        blocked |= 1 << l;
+                    }
+                },
+            );
             return blocked;
         }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
         let mut blocked = 0;
-        crate::accel::packet::traverse::<AVX>(&self.bvh, packet, lanes, |p, hit, leaf| {
-            let mut now = 0;
-            for_each_lane(hit, |l| {
-                if self
-                    .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
-                    .is_some()
-                {
-                    now |= 1 << l;
-                }
-            });
-            blocked |= now;
-            now
-        });
+        crate::accel::packet::traverse::<AVX>(
+            &self.bvh,
+            packet,
+            lanes,
+            #[inline(always)]
+            |p, hit, leaf| {
+                let mut now = 0;
+                for_each_lane(
+                    hit,
+                    #[inline(always)]
+                    |l| {
+                        if self
+                            .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
+                            .is_some()
+                        {
+                            now |= 1 << l;
+                        }
+                    },
+                );
+                blocked |= now;
+                now
+            },
+        );
         blocked
     }
 
@@ -585,18 +620,23 @@ impl Mesh {
             return;
         }
         wt.extend(stream.rays.iter().map(WatertightRay::new));
-        crate::accel::stream::traverse::<AVX>(&self.bvh, stream, |leaf, ids, s| {
-            for &r in ids {
-                let r = r as usize;
-                let reach = Self::reach(s.t_max[r], &best[r]);
-                if let Some(h) = self.leaf_hit::<AVX>(&wt[r], leaf, s.t_min[r], reach)
-                    && self.wins(h.t, h.triangle, &best[r])
-                {
-                    s.t_max[r] = h.t;
-                    best[r] = Some(h);
+        crate::accel::stream::traverse::<AVX>(
+            &self.bvh,
+            stream,
+            #[inline(always)]
+            |leaf, ids, s| {
+                for &r in ids {
+                    let r = r as usize;
+                    let reach = Self::reach(s.t_max[r], &best[r]);
+                    if let Some(h) = self.leaf_hit::<AVX>(&wt[r], leaf, s.t_min[r], reach)
+                        && self.wins(h.t, h.triangle, &best[r])
+                    {
+                        s.t_max[r] = h.t;
+                        best[r] = Some(h);
+                    }
                 }
-            }
-        });
+            },
+        );
     }
 
     crate::simd_entry! {
@@ -704,6 +744,7 @@ impl Mesh {
                 t_min,
                 t_max,
                 true,
+                #[inline(always)]
                 |leaf, t_max| self.leaf_hit::<AVX>(&wt, leaf, t_min, t_max).map(|h| h.t),
                 |leaf| self.prefetch_leaf(leaf),
             ),

@@ -389,71 +389,95 @@ impl WatertightRay {
 
     /// [`Self::edges4`] for the eight lanes of two blocks in AVX
     /// registers: the same operations in the same order.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
+    /// `#[target_feature]` of its own, so that it is inlined into the AVX2
+    /// entry point with its intrinsics (see [`crate::accel::simd`]).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn edges8_avx2(&self, blocks: [&Tri4; 2]) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
-        use std::arch::x86_64::*;
-        let [kx, ky, kz] = self.k;
-        let row = |vi: usize, a: usize| -> __m256 {
-            let lo: __m128 = bytemuck::cast(blocks[0].v[vi][a]);
-            let hi: __m128 = bytemuck::cast(blocks[1].v[vi][a]);
-            _mm256_set_m128(hi, lo)
-        };
-        let sign = _mm256_set1_ps(-0.0);
-        let abs = |x: __m256| _mm256_andnot_ps(sign, x);
-        let sx = _mm256_set1_ps(self.shear.x);
-        let sy = _mm256_set1_ps(self.shear.y);
-        let (ox, oy, oz) = (
-            _mm256_set1_ps(self.origin[kx]),
-            _mm256_set1_ps(self.origin[ky]),
-            _mm256_set1_ps(self.origin[kz]),
-        );
-        let vertex = |vi: usize| {
-            let rx = _mm256_sub_ps(row(vi, kx), ox);
-            let ry = _mm256_sub_ps(row(vi, ky), oy);
-            let rz = _mm256_sub_ps(row(vi, kz), oz);
-            let x = _mm256_sub_ps(rx, _mm256_mul_ps(sx, rz));
-            let y = _mm256_sub_ps(ry, _mm256_mul_ps(sy, rz));
-            let mag = _mm256_max_ps(_mm256_max_ps(abs(rx), abs(ry)), abs(rz));
-            (x, y, mag, _mm256_add_ps(abs(x), abs(y)))
-        };
-        let (ax, ay, ma, sa) = vertex(0);
-        let (bx, by, mb, sb) = vertex(1);
-        let (cx, cy, mc, sc) = vertex(2);
-        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-        let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
-        let bound = |m1: __m256, m2: __m256, s1: __m256, s2: __m256| {
-            _mm256_mul_ps(
-                _mm256_mul_ps(tol, _mm256_max_ps(m1, m2)),
-                _mm256_add_ps(s1, s2),
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn edges8_avx2(&self, blocks: [&Tri4; 2]) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
+        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+        unsafe {
+            use std::arch::x86_64::*;
+            let [kx, ky, kz] = self.k;
+            let row = {
+                #[inline(always)]
+                |vi: usize, a: usize| -> __m256 {
+                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][a]);
+                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][a]);
+                    _mm256_set_m128(hi, lo)
+                }
+            };
+            let sign = _mm256_set1_ps(-0.0);
+            let abs = {
+                #[inline(always)]
+                |x: __m256| _mm256_andnot_ps(sign, x)
+            };
+            let sx = _mm256_set1_ps(self.shear.x);
+            let sy = _mm256_set1_ps(self.shear.y);
+            let (ox, oy, oz) = (
+                _mm256_set1_ps(self.origin[kx]),
+                _mm256_set1_ps(self.origin[ky]),
+                _mm256_set1_ps(self.origin[kz]),
+            );
+            let vertex = {
+                #[inline(always)]
+                |vi: usize| {
+                    let rx = _mm256_sub_ps(row(vi, kx), ox);
+                    let ry = _mm256_sub_ps(row(vi, ky), oy);
+                    let rz = _mm256_sub_ps(row(vi, kz), oz);
+                    let x = _mm256_sub_ps(rx, _mm256_mul_ps(sx, rz));
+                    let y = _mm256_sub_ps(ry, _mm256_mul_ps(sy, rz));
+                    let mag = _mm256_max_ps(_mm256_max_ps(abs(rx), abs(ry)), abs(rz));
+                    (x, y, mag, _mm256_add_ps(abs(x), abs(y)))
+                }
+            };
+            let (ax, ay, ma, sa) = vertex(0);
+            let (bx, by, mb, sb) = vertex(1);
+            let (cx, cy, mc, sc) = vertex(2);
+            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
+            let bound = {
+                #[inline(always)]
+                |m1: __m256, m2: __m256, s1: __m256, s2: __m256| {
+                    _mm256_mul_ps(
+                        _mm256_mul_ps(tol, _mm256_max_ps(m1, m2)),
+                        _mm256_add_ps(s1, s2),
+                    )
+                }
+            };
+            let b0 = bound(mb, mc, sb, sc);
+            let b1 = bound(mc, ma, sc, sa);
+            let b2 = bound(ma, mb, sa, sb);
+            let gt = {
+                #[inline(always)]
+                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32
+            };
+            let lt = {
+                #[inline(always)]
+                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
+            };
+            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
+            let zero = _mm256_setzero_ps();
+            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
+            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
+            let lanes = (!clean | !(negative & positive)) & 0xff;
+            (
+                lanes,
+                [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
+                [bytemuck::cast(b0), bytemuck::cast(b1), bytemuck::cast(b2)],
             )
-        };
-        let b0 = bound(mb, mc, sb, sc);
-        let b1 = bound(mc, ma, sc, sa);
-        let b2 = bound(ma, mb, sa, sb);
-        let gt =
-            |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32;
-        let lt =
-            |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32;
-        let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
-        let zero = _mm256_setzero_ps();
-        let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
-        let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
-        let lanes = (!clean | !(negative & positive)) & 0xff;
-        (
-            lanes,
-            [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
-            [bytemuck::cast(b0), bytemuck::cast(b1), bytemuck::cast(b2)],
-        )
+        }
     }
 
     /// The lanes whose edge test passed or needs the re-check, in lane
     /// order (`corners(l)`: lane `l`'s triangle): the nearest hit inside
     /// `(t_min, t_max)`, which shrinks to each hit found.
-    #[inline(never)]
+    #[inline(always)]
     fn finish<const N: usize>(
         &self,
         corners: impl Fn(usize) -> [Vec3A; 3],

@@ -85,6 +85,37 @@ impl RenderScene {
         t_max: f32,
         brute_force: bool,
     ) -> Option<(f32, LocalHit)> {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            #[target_feature(enable = "avx2,fma")]
+            fn fast(
+                this: &RenderScene,
+                index: u32,
+                ray: &Ray,
+                t_min: f32,
+                t_max: f32,
+                brute_force: bool,
+            ) -> Option<(f32, LocalHit)> {
+                this.cut_out_loop::<true>(index, ray, t_min, t_max, brute_force)
+            }
+            // SAFETY: `AVX` is set only by the AVX2 entry points, which run
+            // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
+            #[allow(unsafe_code)]
+            return unsafe { fast(self, index, ray, t_min, t_max, brute_force) };
+        }
+        self.cut_out_loop::<false>(index, ray, t_min, t_max, brute_force)
+    }
+
+    /// The body of [`Self::intersect_cut_out`], inlined into its code path.
+    #[inline(always)]
+    fn cut_out_loop<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        brute_force: bool,
+    ) -> Option<(f32, LocalHit)> {
         let inst = &self.instances[index as usize];
         let local = to_object(inst, ray);
         let mut t_min = t_min;
@@ -206,12 +237,20 @@ impl RenderScene {
             }
         }
         if !self.tlas.leaf_instances.is_empty() {
-            traverse_bvh::<AVX>(&self.tlas.bvh, ray, t_min, t_max, false, |slot, t_max| {
-                let inst = self.tlas.leaf_instances[slot];
-                let (t, h) = self.intersect_instance::<AVX>(inst, ray, t_min, t_max)?;
-                best = Some((t, inst, h));
-                Some(t)
-            });
+            traverse_bvh::<AVX>(
+                &self.tlas.bvh,
+                ray,
+                t_min,
+                t_max,
+                false,
+                #[inline(always)]
+                |slot, t_max| {
+                    let inst = self.tlas.leaf_instances[slot];
+                    let (t, h) = self.intersect_instance::<AVX>(inst, ray, t_min, t_max)?;
+                    best = Some((t, inst, h));
+                    Some(t)
+                },
+            );
         }
         let (t, index, local) = best?;
         Some(self.finish_hit(t, index, local))
@@ -230,10 +269,18 @@ impl RenderScene {
         if self.tlas.leaf_instances.is_empty() {
             return false;
         }
-        traverse_bvh::<AVX>(&self.tlas.bvh, ray, t_min, t_max, true, |slot, t_max| {
-            self.occludes_instance::<AVX>(self.tlas.leaf_instances[slot], ray, t_min, t_max)
-                .then_some(t_min)
-        })
+        traverse_bvh::<AVX>(
+            &self.tlas.bvh,
+            ray,
+            t_min,
+            t_max,
+            true,
+            #[inline(always)]
+            |slot, t_max| {
+                self.occludes_instance::<AVX>(self.tlas.leaf_instances[slot], ray, t_min, t_max)
+                    .then_some(t_min)
+            },
+        )
     }
 
     /// Closest hits of up to [`LANES`] rays at once (each searched in
@@ -274,36 +321,50 @@ impl RenderScene {
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX>(bvh, &mut packet, ALL_LANES, |p, lanes, leaf| {
-            let lf = bvh.leaves[leaf as usize];
-            for slot in lf.first..lf.first + lf.count {
-                let index = self.tlas.leaf_instances[slot as usize];
-                let inst = &self.instances[index as usize];
-                if self.has_alpha(inst) {
-                    for_each_lane(lanes, |l| {
-                        let ray = &p.rays[l];
-                        if let Some((t, h)) =
-                            self.intersect_instance::<AVX>(index, ray, p.t_min[l], p.t_max[l])
-                        {
-                            p.t_max[l] = t;
-                            best[l] = Some((t, index, h));
-                        }
-                    });
-                    continue;
+        packet::traverse::<AVX>(
+            bvh,
+            &mut packet,
+            ALL_LANES,
+            #[inline(always)]
+            |p, lanes, leaf| {
+                let lf = bvh.leaves[leaf as usize];
+                for slot in lf.first..lf.first + lf.count {
+                    let index = self.tlas.leaf_instances[slot as usize];
+                    let inst = &self.instances[index as usize];
+                    if self.has_alpha(inst) {
+                        for_each_lane(
+                            lanes,
+                            #[inline(always)]
+                            |l| {
+                                let ray = &p.rays[l];
+                                if let Some((t, h)) = self
+                                    .intersect_instance::<AVX>(index, ray, p.t_min[l], p.t_max[l])
+                                {
+                                    p.t_max[l] = t;
+                                    best[l] = Some((t, index, h));
+                                }
+                            },
+                        );
+                        continue;
+                    }
+                    match &inst.geometry {
+                        InstanceGeometry::Shape(s) => for_each_lane(
+                            lanes,
+                            #[inline(always)]
+                            |l| {
+                                let local = to_object(inst, &p.rays[l]);
+                                if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
+                                    p.t_max[l] = h.t;
+                                    best[l] = Some((h.t, index, LocalHit::shape(&h)));
+                                }
+                            },
+                        ),
+                        InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
+                    }
                 }
-                match &inst.geometry {
-                    InstanceGeometry::Shape(s) => for_each_lane(lanes, |l| {
-                        let local = to_object(inst, &p.rays[l]);
-                        if let Some(h) = s.intersect(&local, p.t_min[l], p.t_max[l]) {
-                            p.t_max[l] = h.t;
-                            best[l] = Some((h.t, index, LocalHit::shape(&h)));
-                        }
-                    }),
-                    InstanceGeometry::Mesh(m) => mesh(p, lanes, index, inst, m, best),
-                }
-            }
-            0
-        });
+                0
+            },
+        );
     }
 
     #[inline(always)]
@@ -315,30 +376,45 @@ impl RenderScene {
     ) {
         let n = rays.len().min(LANES);
         let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
-        self.top_level_packet::<AVX>(rays, &mut best, |p, lanes, index, inst, m, best| {
-            let mut hits = [None; LANES];
-            if mesh_packets {
-                let mut local = Packet::new(&[], &[], &[]);
-                for_each_lane(lanes, |l| {
-                    local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
-                });
-                m.intersect_packet_kernel::<AVX>(&mut local, lanes, &mut hits);
-            } else {
-                for_each_lane(lanes, |l| {
-                    hits[l] = m.intersect_kernel::<AVX>(
-                        &to_object(inst, &p.rays[l]),
-                        p.t_min[l],
-                        p.t_max[l],
+        self.top_level_packet::<AVX>(
+            rays,
+            &mut best,
+            #[inline(always)]
+            |p, lanes, index, inst, m, best| {
+                let mut hits = [None; LANES];
+                if mesh_packets {
+                    let mut local = Packet::new(&[], &[], &[]);
+                    for_each_lane(
+                        lanes,
+                        #[inline(always)]
+                        |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
                     );
-                });
-            }
-            for_each_lane(lanes, |l| {
-                if let Some(h) = hits[l] {
-                    p.t_max[l] = h.t;
-                    best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                    m.intersect_packet_kernel::<AVX>(&mut local, lanes, &mut hits);
+                } else {
+                    for_each_lane(
+                        lanes,
+                        #[inline(always)]
+                        |l| {
+                            hits[l] = m.intersect_kernel::<AVX>(
+                                &to_object(inst, &p.rays[l]),
+                                p.t_min[l],
+                                p.t_max[l],
+                            );
+                        },
+                    );
                 }
-            });
-        });
+                for_each_lane(
+                    lanes,
+                    #[inline(always)]
+                    |l| {
+                        if let Some(h) = hits[l] {
+                            p.t_max[l] = h.t;
+                            best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                        }
+                    },
+                );
+            },
+        );
         for (l, o) in out[..n].iter_mut().enumerate() {
             *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
         }
@@ -370,15 +446,20 @@ impl RenderScene {
             let first = p * LANES;
             let best = &mut best[first..first + packet_rays.len()];
             self.top_level_packet::<AVX>(packet_rays, best, |p, lanes, index, inst, _, _| {
-                for_each_lane(lanes, |l| {
-                    let d = inst
-                        .transform
-                        .to_object
-                        .transform_vector3a(p.rays[l].direction);
-                    let octant =
-                        (d.x < 0.0) as u64 | ((d.y < 0.0) as u64) << 1 | ((d.z < 0.0) as u64) << 2;
-                    deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
-                })
+                for_each_lane(
+                    lanes,
+                    #[inline(always)]
+                    |l| {
+                        let d = inst
+                            .transform
+                            .to_object
+                            .transform_vector3a(p.rays[l].direction);
+                        let octant = (d.x < 0.0) as u64
+                            | ((d.y < 0.0) as u64) << 1
+                            | ((d.z < 0.0) as u64) << 2;
+                        deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
+                    },
+                )
             });
         }
         // One stream per (instance, octant), in a fixed order.
@@ -439,62 +520,89 @@ impl RenderScene {
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let todo = ALL_LANES & !blocked;
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX>(bvh, &mut packet, todo, |p, lanes, leaf| {
-            let lf = bvh.leaves[leaf as usize];
-            let mut lanes = lanes;
-            let mut found = 0;
-            for slot in lf.first..lf.first + lf.count {
-                if lanes == 0 {
-                    break;
+        packet::traverse::<AVX>(
+            bvh,
+            &mut packet,
+            todo,
+            #[inline(always)]
+            |p, lanes, leaf| {
+                let lf = bvh.leaves[leaf as usize];
+                let mut lanes = lanes;
+                let mut found = 0;
+                for slot in lf.first..lf.first + lf.count {
+                    if lanes == 0 {
+                        break;
+                    }
+                    let index = self.tlas.leaf_instances[slot as usize];
+                    let inst = &self.instances[index as usize];
+                    let now = match &inst.geometry {
+                        _ if self.has_alpha(inst) => {
+                            let mut now = 0;
+                            for_each_lane(
+                                lanes,
+                                #[inline(always)]
+                                |l| {
+                                    if self.occludes_instance::<AVX>(
+                                        index, &p.rays[l], p.t_min[l], p.t_max[l],
+                                    ) {
+                                        now |= 1 << l;
+                                    }
+                                },
+                            );
+                            now
+                        }
+                        InstanceGeometry::Shape(s) => {
+                            let mut now = 0;
+                            for_each_lane(
+                                lanes,
+                                #[inline(always)]
+                                |l| {
+                                    let local = to_object(inst, &p.rays[l]);
+                                    if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                                        now |= 1 << l;
+                                    }
+                                },
+                            );
+                            now
+                        }
+                        InstanceGeometry::Mesh(m) if !mesh_packets => {
+                            let mut now = 0;
+                            for_each_lane(
+                                lanes,
+                                #[inline(always)]
+                                |l| {
+                                    let local = to_object(inst, &p.rays[l]);
+                                    if m.occluded_kernel::<AVX>(&local, p.t_min[l], p.t_max[l]) {
+                                        now |= 1 << l;
+                                    }
+                                },
+                            );
+                            now
+                        }
+                        InstanceGeometry::Mesh(m) => {
+                            let mut local = Packet::new(&[], &[], &[]);
+                            for_each_lane(
+                                lanes,
+                                #[inline(always)]
+                                |l| {
+                                    local.set_lane(
+                                        l,
+                                        to_object(inst, &p.rays[l]),
+                                        p.t_min[l],
+                                        p.t_max[l],
+                                    )
+                                },
+                            );
+                            m.occluded_packet_kernel::<AVX>(&mut local, lanes)
+                        }
+                    };
+                    found |= now;
+                    lanes &= !now;
                 }
-                let index = self.tlas.leaf_instances[slot as usize];
-                let inst = &self.instances[index as usize];
-                let now = match &inst.geometry {
-                    _ if self.has_alpha(inst) => {
-                        let mut now = 0;
-                        for_each_lane(lanes, |l| {
-                            if self
-                                .occludes_instance::<AVX>(index, &p.rays[l], p.t_min[l], p.t_max[l])
-                            {
-                                now |= 1 << l;
-                            }
-                        });
-                        now
-                    }
-                    InstanceGeometry::Shape(s) => {
-                        let mut now = 0;
-                        for_each_lane(lanes, |l| {
-                            let local = to_object(inst, &p.rays[l]);
-                            if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
-                                now |= 1 << l;
-                            }
-                        });
-                        now
-                    }
-                    InstanceGeometry::Mesh(m) if !mesh_packets => {
-                        let mut now = 0;
-                        for_each_lane(lanes, |l| {
-                            let local = to_object(inst, &p.rays[l]);
-                            if m.occluded_kernel::<AVX>(&local, p.t_min[l], p.t_max[l]) {
-                                now |= 1 << l;
-                            }
-                        });
-                        now
-                    }
-                    InstanceGeometry::Mesh(m) => {
-                        let mut local = Packet::new(&[], &[], &[]);
-                        for_each_lane(lanes, |l| {
-                            local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l])
-                        });
-                        m.occluded_packet_kernel::<AVX>(&mut local, lanes)
-                    }
-                };
-                found |= now;
-                lanes &= !now;
-            }
-            blocked |= found;
-            found
-        });
+                blocked |= found;
+                found
+            },
+        );
         blocked & packet.valid
     }
 
