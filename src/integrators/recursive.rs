@@ -15,7 +15,7 @@ use crate::scene::camera::{Camera, CameraRays};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
-use crate::transport::path::{self, LobeChoice};
+use crate::transport::path::{self, Crossing, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -186,16 +186,19 @@ fn trace_path_in<const MEDIA: bool>(
         }
         radiance +=
             throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        let crossing = path::diffuse_crossing(scene, &hit, &mut it);
         let lobes = LobeChoice::new(&it);
-        path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
-            counters.rays.shadow += 1;
-            if MEDIA {
-                let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
-                radiance += throughput * q.radiance * tr;
-            } else if !scene.occluded(&q.ray, 0.0, q.t_max) {
-                radiance += throughput * q.radiance;
-            }
-        });
+        if crossing != Some(Crossing::Into) {
+            path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
+                counters.rays.shadow += 1;
+                if MEDIA {
+                    let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
+                    radiance += throughput * q.radiance * tr;
+                } else if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                    radiance += throughput * q.radiance;
+                }
+            });
+        }
         let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
             return radiance;
         };
@@ -205,7 +208,7 @@ fn trace_path_in<const MEDIA: bool>(
             RayKind::Camera => counters.rays.camera += 1,
         }
         throughput = throughput * c.sample.weight * c.scale;
-        ray = c.sample.ray;
+        ray = path::start_walk(crossing, &it, c.sample.ray);
         cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;

@@ -114,6 +114,31 @@ pub fn segment_medium(scene: &RenderScene, hit: Option<&Hit>, dir: Vec3A) -> Opt
     }
 }
 
+/// True when a segment of direction `dir` that ended on `hit` ran inside
+/// a subsurface material, whose diffuse boundary
+/// ([`crate::transport::path::diffuse_crossing`]) no light crosses
+/// directly: lights are not sampled from such a segment (every shadow ray
+/// would end on the boundary).
+#[inline]
+fn behind_diffuse_boundary(scene: &RenderScene, hit: Option<&Hit>, dir: Vec3A) -> bool {
+    hit.is_some_and(|h| {
+        h.geometric_normal.dot(dir) > 0.0 && scene.materials()[h.material as usize].subsurface
+    })
+}
+
+/// True when `hit`, found by a ray of direction `dir` that started on a
+/// subsurface material's surface to enter it
+/// ([`crate::transport::path::start_walk`]), is that surface again at the
+/// ray's origin (within the ulps [`beyond`] moves by): the ray crosses it
+/// as an index-matched boundary, so that its random walk is measured from
+/// the surface point itself.
+#[inline]
+fn is_own_entry(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> bool {
+    hit.geometric_normal.dot(dir) < 0.0
+        && scene.materials()[hit.material as usize].subsurface
+        && (beyond(scene, hit, dir) - hit.point).length() >= hit.t
+}
+
 /// True when `hit` is on an index-matched boundary that rays cross.
 #[inline]
 fn is_interface(scene: &RenderScene, hit: &Hit) -> bool {
@@ -130,7 +155,7 @@ fn is_interface(scene: &RenderScene, hit: &Hit) -> bool {
 /// large boundary seen from close by; without this a ray leaving a large
 /// index-matched sphere found it again just outside.
 #[inline]
-fn beyond(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> Vec3A {
+pub fn beyond(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> Vec3A {
     let n = hit.geometric_normal;
     let side = if n.dot(dir) > 0.0 { n } else { -n };
     let size = scene.instances()[hit.instance as usize]
@@ -225,6 +250,9 @@ pub struct MediumVertex {
     pub direction: Vec3A,
     /// The medium.
     pub medium: Medium,
+    /// False inside a subsurface material, where no light is sampled (its
+    /// diffuse boundary blocks every shadow ray).
+    pub lit: bool,
 }
 
 /// What [`propagate`] did with a segment.
@@ -299,7 +327,8 @@ pub fn propagate(
                 };
                 let t = sample_distance(s, u_t);
                 let scatter = (t < t_end).then_some(t);
-                if !scene.lights().is_empty() {
+                let lit = !behind_diffuse_boundary(scene, hit.as_ref(), dir);
+                if lit && !scene.lights().is_empty() {
                     let part = Ray::new(origin, dir);
                     let (l, shadows) =
                         punctual_in_segment(scene, &m, s, &part, t_end, scatter, (u_l, u_e));
@@ -313,6 +342,7 @@ pub fn propagate(
                         point: origin + dir * t,
                         direction: dir,
                         medium: m,
+                        lit,
                     });
                     return out;
                 }
@@ -326,7 +356,7 @@ pub fn propagate(
             return out;
         };
         travelled += t_end;
-        if !is_interface(scene, &h) {
+        if !is_interface(scene, &h) && !(crossing == 0 && is_own_entry(scene, &h, dir)) {
             out.end = SegmentEnd::Surface {
                 hit: Hit { t: travelled, ..h },
                 ray: Ray::new(h.point, dir),
@@ -537,7 +567,7 @@ pub fn medium_next_event(
     let first = bounce_dimension(settings, depth);
     let env = scene.environment();
     let p_env = scene.environment_selection();
-    if env.is_none() && scene.emitters().is_empty() {
+    if !v.lit || (env.is_none() && scene.emitters().is_empty()) {
         return;
     }
     for i in 0..settings.light_samples {

@@ -31,7 +31,7 @@ use crate::scene::material::MaterialClass;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
-use crate::transport::path::{self, LobeChoice};
+use crate::transport::path::{self, Crossing, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -478,17 +478,19 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
         let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
         let lambda = path::path_wavelength(scene, settings, &mut sampler);
-        let spectral;
-        let it = if lambda.is_some() {
+        let changed;
+        let mut crossing = None;
+        let it = if lambda.is_some() || it.surface.subsurface {
             let mut at = *it;
             path::at_wavelength(&mut at, lambda);
-            spectral = at;
-            &spectral
+            crossing = path::diffuse_crossing(scene, &h.hit(), &mut at);
+            changed = at;
+            &changed
         } else {
             it
         };
         let lobes = LobeChoice::new(it);
-        if NEE {
+        if NEE && crossing != Some(Crossing::Into) {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
                 out.push_shadow(h, q)
             });
@@ -498,7 +500,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
         {
             let item = RayItem {
-                ray: cont.sample.ray,
+                ray: path::start_walk(crossing, it, cont.sample.ray),
                 throughput: h.throughput * cont.sample.weight * cont.scale,
                 path: h.path,
                 depth: h.depth + 1,
