@@ -290,6 +290,15 @@ pub fn diffuse_crossing(scene: &RenderScene, hit: &Hit, it: &mut Interaction) ->
     if !it.surface.subsurface {
         return None;
     }
+    Some(cross_diffusely(scene, hit, it))
+}
+
+/// [`diffuse_crossing`] at a subsurface surface; out of line, so that
+/// scenes without subsurface materials carry none of it in their shading
+/// loops.
+#[cold]
+#[inline(never)]
+fn cross_diffusely(scene: &RenderScene, hit: &Hit, it: &mut Interaction) -> Crossing {
     it.ng = -it.ng;
     it.ns = -it.ns;
     if !it.front_face {
@@ -303,11 +312,11 @@ pub fn diffuse_crossing(scene: &RenderScene, hit: &Hit, it: &mut Interaction) ->
     s.mirror = Color::ZERO;
     s.transmission = 0.0;
     s.gltf = None;
-    Some(if it.front_face {
+    if it.front_face {
         Crossing::Into
     } else {
         Crossing::OutOf
-    })
+    }
 }
 
 /// The ray that continues a path from a [`Crossing::Into`] at `it`: the

@@ -481,10 +481,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         let changed;
         let mut crossing = None;
         let it = if lambda.is_some() || it.surface.subsurface {
-            let mut at = *it;
-            path::at_wavelength(&mut at, lambda);
-            crossing = path::diffuse_crossing(scene, &h.hit(), &mut at);
-            changed = at;
+            (changed, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
             &changed
         } else {
             it
@@ -510,6 +507,23 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
             out.push_secondary(cont.sample.kind, item);
         }
     });
+}
+
+/// The interaction `it` of hit `h` at the path's wavelength `lambda` and,
+/// on a subsurface surface, turned into its diffuse boundary
+/// ([`path::diffuse_crossing`]). Out of line: most scenes need neither.
+#[cold]
+#[inline(never)]
+fn at_wavelength_and_boundary(
+    scene: &RenderScene,
+    h: &HitItem,
+    it: &Interaction,
+    lambda: Option<f32>,
+) -> (Interaction, Option<Crossing>) {
+    let mut at = *it;
+    path::at_wavelength(&mut at, lambda);
+    let crossing = path::diffuse_crossing(scene, &h.hit(), &mut at);
+    (at, crossing)
 }
 
 /// Stage: shades the hits of `class` with the kernel for the lobes the
