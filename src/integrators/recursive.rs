@@ -186,7 +186,13 @@ fn trace_path_in<const MEDIA: bool>(
         }
         radiance +=
             throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
-        let crossing = path::diffuse_crossing(scene, &hit, &mut it);
+        // Subsurface materials have scattering interiors: only scenes with
+        // media have them.
+        let crossing = if MEDIA {
+            path::diffuse_crossing(scene, &hit, &mut it)
+        } else {
+            None
+        };
         let lobes = LobeChoice::new(&it);
         if crossing != Some(Crossing::Into) {
             path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
@@ -208,7 +214,11 @@ fn trace_path_in<const MEDIA: bool>(
             RayKind::Camera => counters.rays.camera += 1,
         }
         throughput = throughput * c.sample.weight * c.scale;
-        ray = path::start_walk(crossing, &it, c.sample.ray);
+        ray = if MEDIA {
+            path::start_walk(crossing, &it, c.sample.ray)
+        } else {
+            c.sample.ray
+        };
         cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;

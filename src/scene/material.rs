@@ -683,9 +683,6 @@ pub struct SurfaceSample {
     pub absorption: Color,
     /// [`Material::dispersion`].
     pub dispersion: Option<Dispersion>,
-    /// [`Material::subsurface`]: path transport crosses the surface by
-    /// diffuse transmission.
-    pub subsurface: bool,
     /// Emitted radiance.
     pub emission: Color,
     /// Base colour with its texture (what Gooch shading tones).
@@ -895,7 +892,6 @@ impl Material {
                 ior: self.ior,
                 absorption: self.absorption,
                 dispersion: self.dispersion,
-                subsurface: self.subsurface,
                 emission,
                 base,
                 diffuse_weight: (1.0 - metallic.clamp(0.0, 1.0)) * (1.0 - transmission),
@@ -912,7 +908,6 @@ impl Material {
             ior: self.ior,
             absorption: self.absorption,
             dispersion: self.dispersion,
-            subsurface: self.subsurface,
             emission,
             base,
             diffuse_weight: self.diffuse,

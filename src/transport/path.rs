@@ -287,7 +287,7 @@ pub enum Crossing {
 /// ([`crate::core::medium::slab_diffuse_albedo`]) as its albedo.
 #[inline]
 pub fn diffuse_crossing(scene: &RenderScene, hit: &Hit, it: &mut Interaction) -> Option<Crossing> {
-    if !it.surface.subsurface {
+    if !scene.materials()[hit.material as usize].subsurface {
         return None;
     }
     Some(cross_diffusely(scene, hit, it))

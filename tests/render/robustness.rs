@@ -181,7 +181,6 @@ fn glass(ior: f32) -> SurfaceSample {
         ior,
         absorption: Color::ZERO,
         dispersion: None,
-        subsurface: false,
         emission: Color::ZERO,
         base: Color::ONE,
         diffuse_weight: 0.0,

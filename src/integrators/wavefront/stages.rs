@@ -458,7 +458,10 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 /// (`NEE`: the class has a lobe lights can reach) and at most one
 /// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
 /// from the same sample numbers. `first` is the batch's first path.
-pub fn shade_path<const NEE: bool, const SCATTER: bool>(
+/// `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
+/// ([`path::diffuse_crossing`]) the kernel then handles (kernels of scenes
+/// without subsurface materials carry none of that code).
+pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
     paths: &PathMap,
@@ -480,7 +483,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         let lambda = path::path_wavelength(scene, settings, &mut sampler);
         let changed;
         let mut crossing = None;
-        let it = if lambda.is_some() || it.surface.subsurface {
+        let it = if lambda.is_some() || (SSS && scene.materials()[h.material as usize].subsurface) {
             (changed, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
             &changed
         } else {
@@ -497,7 +500,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
         {
             let item = RayItem {
-                ray: path::start_walk(crossing, it, cont.sample.ray),
+                ray: if SSS {
+                    path::start_walk(crossing, it, cont.sample.ray)
+                } else {
+                    cont.sample.ray
+                },
                 throughput: h.throughput * cont.sample.weight * cont.scale,
                 path: h.path,
                 depth: h.depth + 1,
@@ -542,11 +549,14 @@ pub fn shade_class(
 ) {
     let lobes = (class.is_lit(), class.scatters());
     if settings.transport == Transport::Path {
-        let f = match lobes {
-            (false, false) => shade_path::<false, false>,
-            (false, true) => shade_path::<false, true>,
+        // Subsurface materials are of the general class.
+        let sss = class == MaterialClass::General && scene.materials().iter().any(|m| m.subsurface);
+        let f = match (lobes, sss) {
+            ((false, false), _) => shade_path::<false, false, false>,
+            ((false, true), _) => shade_path::<false, true, false>,
             // Every lit class also scatters diffusely under path transport.
-            (true, _) => shade_path::<true, true>,
+            ((true, _), false) => shade_path::<true, true, false>,
+            ((true, _), true) => shade_path::<true, true, true>,
         };
         return f(scene, settings, paths, first, input, scratch, to);
     }
