@@ -244,7 +244,7 @@ impl Medium {
     /// diffuse albedo `colour` ([`albedo_for_diffuse_albedo`]). Behind
     /// the diffuse boundary of a subsurface material (light enters with
     /// cosine-distributed directions and leaves through a Lambertian
-    /// transmission, see `transport::path::diffuse_crossing`), a large
+    /// transmission, see `transport::volume::diffuse_crossing`), a large
     /// flat slab of it is then a Lambertian reflector of albedo `colour`.
     pub fn subsurface(colour: Color, radius: Color) -> Result<Self, String> {
         if !(colour.min_element() >= 0.0 && colour.max_element() < 1.0) {

@@ -15,7 +15,7 @@ use crate::scene::camera::{Camera, CameraRays};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
-use crate::transport::path::{self, Crossing, LobeChoice};
+use crate::transport::path::{self, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -189,12 +189,12 @@ fn trace_path_in<const MEDIA: bool>(
         // Subsurface materials have scattering interiors: only scenes with
         // media have them.
         let crossing = if MEDIA {
-            path::diffuse_crossing(scene, &hit, &mut it)
+            volume::diffuse_crossing(scene, &hit, &mut it)
         } else {
             None
         };
         let lobes = LobeChoice::new(&it);
-        if crossing != Some(Crossing::Into) {
+        if crossing != Some(volume::Crossing::Into) {
             path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
                 counters.rays.shadow += 1;
                 if MEDIA {
@@ -215,7 +215,7 @@ fn trace_path_in<const MEDIA: bool>(
         }
         throughput = throughput * c.sample.weight * c.scale;
         ray = if MEDIA {
-            path::start_walk(crossing, &it, c.sample.ray)
+            volume::start_walk(crossing, &it, c.sample.ray)
         } else {
             c.sample.ray
         };

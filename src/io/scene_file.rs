@@ -924,7 +924,7 @@ impl Ctx<'_> {
             }
         };
         // A subsurface material's surface is a diffuse-transmission
-        // boundary under path transport (`transport::path::diffuse_crossing`)
+        // boundary under path transport (`transport::volume::diffuse_crossing`)
         // and an index-matched one under Whitted transport: it refracts
         // nothing, so an index of refraction would mean nothing.
         if subsurface && (m.ior.is_some() || dispersion.is_some()) {

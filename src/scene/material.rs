@@ -563,7 +563,7 @@ pub struct Material {
     /// A subsurface material: under path transport the surface is a
     /// diffuse-transmission boundary into the scattering interior (light
     /// enters with cosine-distributed directions and leaves through a
-    /// Lambertian transmission; see `transport::path::diffuse_crossing`)
+    /// Lambertian transmission; see `transport::volume::diffuse_crossing`)
     /// instead of the dielectric its other fields describe, which Whitted
     /// and photon transport keep.
     pub subsurface: bool,

@@ -28,8 +28,8 @@ use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::{RenderSettings, Transport};
 use crate::core::spectrum::{sample_wavelength, wavelength_weight};
+use crate::scene::RenderScene;
 use crate::scene::environment::Environment;
-use crate::scene::{Hit, RenderScene};
 use crate::transport::interaction::{Interaction, RayKind, ShadowQuery, brdf_cos};
 use crate::transport::whitted::{direct_light, direct_light_with};
 
@@ -240,95 +240,6 @@ pub fn sample_bsdf(
         pdf: 0.0,
         kind: RayKind::Reflection,
     })
-}
-
-/// Which way a path crosses the diffuse boundary of a subsurface
-/// material ([`diffuse_crossing`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Crossing {
-    /// From outside into the scattering interior: no light can be sampled
-    /// from here (every light is outside), so next-event estimation is
-    /// skipped.
-    Into,
-    /// From the interior out: next-event estimation as at a diffuse
-    /// surface.
-    OutOf,
-}
-
-/// Turns a hit on a subsurface material's surface into its
-/// diffuse-transmission boundary (the approach of random-walk subsurface
-/// scattering): a white Lambertian lobe facing the side the path goes
-/// on to, `1/pi` times the cosine there, with no Fresnel term. A path
-/// arriving from outside enters the interior in a cosine-distributed
-/// direction about the inward normal; a path arriving from inside (its
-/// random walk reached the boundary) leaves in a cosine-distributed
-/// direction about the outward normal, and lights outside are sampled
-/// from there as at a diffuse surface. Both crossings keep the
-/// throughput (the lobe's albedo is 1). The normals of `it` are turned
-/// to the far side and its surface becomes that lobe (emission kept);
-/// `None`, and `it` untouched, for any other surface.
-///
-/// Where the walk starts and ends matters: a walk that starts a distance
-/// `d` inside loses about `d ln(1/d)` (in mean free paths) of its albedo
-/// (the light that would leave at grazing angles), so the entering ray
-/// must start on the surface itself, not at an origin offset inwards
-/// (seen: 3% too dark with a mean free path of 1e-3 on a ball of radius
-/// 1). The caller therefore starts the ray that continues an
-/// [`Crossing::Into`] at `it.point` ([`start_walk`]); if it finds its own
-/// surface again at once, that is one more entry, which changes nothing.
-/// On the way out the point is moved off `hit` by the object's scale
-/// ([`crate::transport::volume::beyond`]: a walk's exit point on a large
-/// object is off by ulps of the object, which a point's own ulps do not
-/// clear).
-///
-/// A semi-infinite slab behind such a boundary reflects like a
-/// Lambertian surface whatever its radius: the light that comes back out
-/// leaves in a cosine distribution, with the slab's diffuse albedo
-/// ([`crate::core::medium::slab_diffuse_albedo`]) as its albedo.
-#[inline]
-pub fn diffuse_crossing(scene: &RenderScene, hit: &Hit, it: &mut Interaction) -> Option<Crossing> {
-    if !scene.materials()[hit.material as usize].subsurface {
-        return None;
-    }
-    Some(cross_diffusely(scene, hit, it))
-}
-
-/// [`diffuse_crossing`] at a subsurface surface; out of line, so that
-/// scenes without subsurface materials carry none of it in their shading
-/// loops.
-#[cold]
-#[inline(never)]
-fn cross_diffusely(scene: &RenderScene, hit: &Hit, it: &mut Interaction) -> Crossing {
-    it.ng = -it.ng;
-    it.ns = -it.ns;
-    if !it.front_face {
-        it.point = crate::transport::volume::beyond(scene, hit, it.ng);
-    }
-    let s = &mut it.surface;
-    s.diffuse = Color::ONE;
-    s.base = Color::ONE;
-    s.diffuse_weight = 1.0;
-    s.specular = Color::ZERO;
-    s.mirror = Color::ZERO;
-    s.transmission = 0.0;
-    s.gltf = None;
-    if it.front_face {
-        Crossing::Into
-    } else {
-        Crossing::OutOf
-    }
-}
-
-/// The ray that continues a path from a [`Crossing::Into`] at `it`: the
-/// sampled ray from the surface point itself, not offset (see
-/// [`diffuse_crossing`]); other rays unchanged.
-#[inline]
-pub fn start_walk(crossing: Option<Crossing>, it: &Interaction, ray: Ray) -> Ray {
-    if crossing == Some(Crossing::Into) {
-        Ray::new(it.point, ray.direction)
-    } else {
-        ray
-    }
 }
 
 /// The sampler dimension of a path's wavelength in spectral mode: a set

@@ -31,7 +31,7 @@ use crate::scene::material::MaterialClass;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
-use crate::transport::path::{self, Crossing, LobeChoice};
+use crate::transport::path::{self, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
 use crate::transport::whitted::{direct_light, scatter};
 
@@ -459,7 +459,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 /// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
 /// from the same sample numbers. `first` is the batch's first path.
 /// `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
-/// ([`path::diffuse_crossing`]) the kernel then handles (kernels of scenes
+/// ([`volume::diffuse_crossing`]) the kernel then handles (kernels of scenes
 /// without subsurface materials carry none of that code).
 pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scene: &RenderScene,
@@ -490,7 +490,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
             it
         };
         let lobes = LobeChoice::new(it);
-        if NEE && crossing != Some(Crossing::Into) {
+        if NEE && crossing != Some(volume::Crossing::Into) {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
                 out.push_shadow(h, q)
             });
@@ -501,7 +501,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
         {
             let item = RayItem {
                 ray: if SSS {
-                    path::start_walk(crossing, it, cont.sample.ray)
+                    volume::start_walk(crossing, it, cont.sample.ray)
                 } else {
                     cont.sample.ray
                 },
@@ -518,7 +518,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
 
 /// The interaction `it` of hit `h` at the path's wavelength `lambda` and,
 /// on a subsurface surface, turned into its diffuse boundary
-/// ([`path::diffuse_crossing`]). Out of line: most scenes need neither.
+/// ([`volume::diffuse_crossing`]). Out of line: most scenes need neither.
 #[cold]
 #[inline(never)]
 fn at_wavelength_and_boundary(
@@ -526,10 +526,10 @@ fn at_wavelength_and_boundary(
     h: &HitItem,
     it: &Interaction,
     lambda: Option<f32>,
-) -> (Interaction, Option<Crossing>) {
+) -> (Interaction, Option<volume::Crossing>) {
     let mut at = *it;
     path::at_wavelength(&mut at, lambda);
-    let crossing = path::diffuse_crossing(scene, &h.hit(), &mut at);
+    let crossing = volume::diffuse_crossing(scene, &h.hit(), &mut at);
     (at, crossing)
 }
 
