@@ -481,11 +481,16 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
         let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
         let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
         let lambda = path::path_wavelength(scene, settings, &mut sampler);
-        let changed;
+        let spectral;
         let mut crossing = None;
-        let it = if lambda.is_some() || (SSS && scene.materials()[h.material as usize].subsurface) {
-            (changed, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
-            &changed
+        let it = if SSS && scene.materials()[h.material as usize].subsurface {
+            (spectral, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
+            &spectral
+        } else if lambda.is_some() {
+            let mut at = *it;
+            path::at_wavelength(&mut at, lambda);
+            spectral = at;
+            &spectral
         } else {
             it
         };
