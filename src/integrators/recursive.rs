@@ -186,16 +186,25 @@ fn trace_path_in<const MEDIA: bool>(
         }
         radiance +=
             throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        // Subsurface materials have scattering interiors: only scenes with
+        // media have them.
+        let crossing = if MEDIA {
+            volume::diffuse_crossing(scene, &hit, &mut it)
+        } else {
+            None
+        };
         let lobes = LobeChoice::new(&it);
-        path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
-            counters.rays.shadow += 1;
-            if MEDIA {
-                let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
-                radiance += throughput * q.radiance * tr;
-            } else if !scene.occluded(&q.ray, 0.0, q.t_max) {
-                radiance += throughput * q.radiance;
-            }
-        });
+        if crossing != Some(volume::Crossing::Into) {
+            path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
+                counters.rays.shadow += 1;
+                if MEDIA {
+                    let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
+                    radiance += throughput * q.radiance * tr;
+                } else if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                    radiance += throughput * q.radiance;
+                }
+            });
+        }
         let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
             return radiance;
         };
@@ -205,7 +214,11 @@ fn trace_path_in<const MEDIA: bool>(
             RayKind::Camera => counters.rays.camera += 1,
         }
         throughput = throughput * c.sample.weight * c.scale;
-        ray = c.sample.ray;
+        ray = if MEDIA {
+            volume::start_walk(crossing, &it, c.sample.ray)
+        } else {
+            c.sample.ray
+        };
         cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;

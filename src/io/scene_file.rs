@@ -923,24 +923,36 @@ impl Ctx<'_> {
                 return Err("subsurface_color and subsurface_radius must be given together".into());
             }
         };
-        // A subsurface material's surface is, unless told otherwise, an
-        // index-matched boundary (the colour is the medium's).
+        // A subsurface material's surface is a diffuse-transmission
+        // boundary under path transport (`transport::volume::diffuse_crossing`)
+        // and an index-matched one under Whitted transport: it refracts
+        // nothing, so an index of refraction would mean nothing.
+        if subsurface && (m.ior.is_some() || dispersion.is_some()) {
+            return Err("a subsurface material has a diffuse boundary that does not refract: give no ior or dispersion with subsurface_color".into());
+        }
+        if subsurface
+            && (m.color.is_some()
+                || m.texture.is_some()
+                || m.diffuse.is_some()
+                || m.specular.is_some()
+                || m.mirror.is_some()
+                || m.transmission.is_some())
+        {
+            return Err("a subsurface material's surface is its diffuse boundary: give no color, texture, diffuse, specular, mirror or transmission with subsurface_color".into());
+        }
         let d = if subsurface {
             Material {
                 base_color: Color::ONE,
                 diffuse: 0.0,
                 transmission: 1.0,
-                ior: m.ior.unwrap_or(1.0),
+                ior: 1.0,
+                subsurface: true,
                 ..d
             }
         } else {
             d
         };
-        let ior = if subsurface && m.ior.is_none() && dispersion.is_none() {
-            1.0
-        } else {
-            ior
-        };
+        let ior = if subsurface { 1.0 } else { ior };
         if !(ior.is_finite() && ior > 0.0) {
             return Err(format!("ior must be a positive finite number, got {ior}"));
         }

@@ -560,6 +560,13 @@ pub struct Material {
     /// Henyey-Greenstein asymmetry `g` of the interior's scattering, in
     /// `(-1, 1)`.
     pub phase_g: f32,
+    /// A subsurface material: under path transport the surface is a
+    /// diffuse-transmission boundary into the scattering interior (light
+    /// enters with cosine-distributed directions and leaves through a
+    /// Lambertian transmission; see `transport::volume::diffuse_crossing`)
+    /// instead of the dielectric its other fields describe, which Whitted
+    /// and photon transport keep.
+    pub subsurface: bool,
     /// How the index of refraction depends on wavelength (`None`: it does
     /// not, `ior` holds for every wavelength). A scene with a dispersive
     /// material is path traced spectrally (see [`crate::core::spectrum`]);
@@ -614,6 +621,7 @@ impl Default for Material {
             absorption: Color::ZERO,
             scattering: Color::ZERO,
             phase_g: 0.0,
+            subsurface: false,
             dispersion: None,
             emission: Color::ZERO,
             emission_texture: None,
@@ -777,7 +785,10 @@ impl Material {
     /// the material has, so shading by class gives exactly the radiance of
     /// shading every lobe.
     pub fn class(&self) -> MaterialClass {
-        if self.metallic_roughness.is_some() {
+        // A subsurface boundary is lit and scatters diffusely under path
+        // transport; under Whitted transport its dielectric lobe is all
+        // the general kernel finds.
+        if self.metallic_roughness.is_some() || self.subsurface {
             return MaterialClass::General;
         }
         let lit = (self.diffuse > 0.0 && self.base_color.max_element() > 0.0)

@@ -304,6 +304,7 @@ pub fn bounce_dimension(settings: &RenderSettings, depth: u32) -> u32 {
 /// whose BSDF ray is never traced: there they take the full weight. `emit`
 /// receives each query; the radiance is not yet multiplied by the path
 /// throughput.
+#[inline]
 pub fn next_event(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -574,6 +575,7 @@ impl Continuation {
 /// Chooses how the path continues from a vertex at `depth` whose ray came
 /// with `throughput`: lobe, direction, roulette, depth and contribution
 /// limits. Reads the sampler's lobe, direction and roulette dimensions.
+#[inline]
 pub fn continue_path(
     settings: &RenderSettings,
     it: &Interaction,

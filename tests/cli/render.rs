@@ -852,6 +852,18 @@ fn bad_media_fail_cleanly_naming_the_object() {
             &["disk", "not closed"][..],
         ),
         (
+            format!(
+                "{camera}[[objects]]\nname = \"coated\"\nshape = {sphere}\nmaterial = {{ subsurface_color = 0.5, subsurface_radius = 0.1, ior = 1.4 }}\n"
+            ),
+            &["coated", "diffuse boundary", "ior"][..],
+        ),
+        (
+            format!(
+                "{camera}[[objects]]\nname = \"tinted\"\nshape = {sphere}\nmaterial = {{ subsurface_color = 0.5, subsurface_radius = 0.1, color = 0.3 }}\n"
+            ),
+            &["tinted", "diffuse boundary", "color"][..],
+        ),
+        (
             format!("{camera}[medium]\nscattering = -1\n"),
             &["medium", "sigma_s"][..],
         ),

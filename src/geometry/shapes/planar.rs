@@ -113,6 +113,7 @@ pub(super) fn intersect_disk(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Optio
 /// Convex polygon: the plane through the first vertex with the Newell
 /// normal `n`, then the hit point must lie on the inner side of every edge
 /// (`(b - a) x (p - a) · n >= 0`, boundary included).
+#[inline]
 pub(super) fn intersect_polygon(
     ray: &Ray,
     vertices: &[Vec3],

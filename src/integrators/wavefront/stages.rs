@@ -458,7 +458,10 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 /// (`NEE`: the class has a lobe lights can reach) and at most one
 /// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
 /// from the same sample numbers. `first` is the batch's first path.
-pub fn shade_path<const NEE: bool, const SCATTER: bool>(
+/// `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
+/// ([`volume::diffuse_crossing`]) the kernel then handles (kernels of scenes
+/// without subsurface materials carry none of that code).
+pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
     paths: &PathMap,
@@ -479,7 +482,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
         let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
         let lambda = path::path_wavelength(scene, settings, &mut sampler);
         let spectral;
-        let it = if lambda.is_some() {
+        let mut crossing = None;
+        let it = if SSS && scene.materials()[h.material as usize].subsurface {
+            (spectral, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
+            &spectral
+        } else if lambda.is_some() {
             let mut at = *it;
             path::at_wavelength(&mut at, lambda);
             spectral = at;
@@ -488,7 +495,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
             it
         };
         let lobes = LobeChoice::new(it);
-        if NEE {
+        if NEE && crossing != Some(volume::Crossing::Into) {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
                 out.push_shadow(h, q)
             });
@@ -498,7 +505,11 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
                 path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
         {
             let item = RayItem {
-                ray: cont.sample.ray,
+                ray: if SSS {
+                    volume::start_walk(crossing, it, cont.sample.ray)
+                } else {
+                    cont.sample.ray
+                },
                 throughput: h.throughput * cont.sample.weight * cont.scale,
                 path: h.path,
                 depth: h.depth + 1,
@@ -508,6 +519,23 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool>(
             out.push_secondary(cont.sample.kind, item);
         }
     });
+}
+
+/// The interaction `it` of hit `h` at the path's wavelength `lambda` and,
+/// on a subsurface surface, turned into its diffuse boundary
+/// ([`volume::diffuse_crossing`]). Out of line: most scenes need neither.
+#[cold]
+#[inline(never)]
+fn at_wavelength_and_boundary(
+    scene: &RenderScene,
+    h: &HitItem,
+    it: &Interaction,
+    lambda: Option<f32>,
+) -> (Interaction, Option<volume::Crossing>) {
+    let mut at = *it;
+    path::at_wavelength(&mut at, lambda);
+    let crossing = volume::diffuse_crossing(scene, &h.hit(), &mut at);
+    (at, crossing)
 }
 
 /// Stage: shades the hits of `class` with the kernel for the lobes the
@@ -526,11 +554,14 @@ pub fn shade_class(
 ) {
     let lobes = (class.is_lit(), class.scatters());
     if settings.transport == Transport::Path {
-        let f = match lobes {
-            (false, false) => shade_path::<false, false>,
-            (false, true) => shade_path::<false, true>,
+        // Subsurface materials are of the general class.
+        let sss = class == MaterialClass::General && scene.materials().iter().any(|m| m.subsurface);
+        let f = match (lobes, sss) {
+            ((false, false), _) => shade_path::<false, false, false>,
+            ((false, true), _) => shade_path::<false, true, false>,
             // Every lit class also scatters diffusely under path transport.
-            (true, _) => shade_path::<true, true>,
+            ((true, _), false) => shade_path::<true, true, false>,
+            ((true, _), true) => shade_path::<true, true, true>,
         };
         return f(scene, settings, paths, first, input, scratch, to);
     }
