@@ -8,7 +8,7 @@ use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
 use crate::scene::render_scene::{
-    RenderScene, has_cutouts, has_dispersion, has_scattering, resolve_lights,
+    RenderScene, constant_surface, has_cutouts, has_dispersion, has_scattering, resolve_lights,
 };
 use glam::DVec3;
 
@@ -78,6 +78,7 @@ impl RenderScene {
         self.cutouts |= material.alpha.is_some();
         self.spectral |= material.dispersion.is_some();
         self.scattering |= material.has_scattering_interior();
+        self.surfaces.push(constant_surface(&material));
         self.materials.push(material);
         self.materials.len() as u32 - 1
     }
@@ -85,6 +86,7 @@ impl RenderScene {
     /// Replaces material `index`. Touches no BVH.
     pub fn set_material(&mut self, index: u32, material: Material) {
         self.emitters_stale = true;
+        self.surfaces[index as usize] = constant_surface(&material);
         self.materials[index as usize] = material;
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
@@ -109,6 +111,7 @@ impl RenderScene {
                 }
             }
         }
+        self.surfaces.swap_remove(index as usize);
         let removed = self.materials.swap_remove(index as usize);
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
