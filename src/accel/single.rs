@@ -2,8 +2,6 @@
 //! distances on the stack so that subtrees made stale by a closer hit are
 //! dropped without being tested.
 
-use std::mem::MaybeUninit;
-
 use crate::accel::bvh8::{Bvh8, LEAF};
 use crate::accel::node::NodeRay;
 use crate::core::math::Ray;
@@ -16,12 +14,10 @@ const FIXED: usize = 32;
 /// At most seven entries per level are pending, and nearest-first
 /// traversal rarely holds more than a few; deeper stacks (large or
 /// degenerate input, see the deep-tree test in `geometry::mesh`) spill to
-/// a `Vec`, which allocates only when first pushed to. The fixed part is
-/// left uninitialised: zeroing it compiled to a `memset` call per
-/// traversal (about 35 instructions, once per mesh instance a ray visits;
-/// callgrind, glTF Cornell box).
+/// a `Vec`, which allocates only when first pushed to. (A small fixed part
+/// is zeroed with a few stores rather than a `memset` call per ray.)
 pub(crate) struct Stack {
-    fixed: [MaybeUninit<u64>; FIXED],
+    fixed: [u64; FIXED],
     len: usize,
     spill: Vec<u64>,
 }
@@ -30,7 +26,7 @@ impl Stack {
     #[inline(always)]
     pub(crate) fn new() -> Self {
         Self {
-            fixed: [MaybeUninit::uninit(); FIXED],
+            fixed: [0; FIXED],
             len: 0,
             spill: Vec::new(),
         }
@@ -41,7 +37,7 @@ impl Stack {
     #[inline(always)]
     pub(crate) fn push(&mut self, v: u64) {
         if self.len < FIXED {
-            self.fixed[self.len] = MaybeUninit::new(v);
+            self.fixed[self.len] = v;
             self.len += 1;
         } else {
             self.push_spill(v);
@@ -63,10 +59,7 @@ impl Stack {
             return None;
         }
         self.len -= 1;
-        // SAFETY: the entries below `len` were written by `push` (`len`
-        // only grows there, after the write).
-        #[allow(unsafe_code)]
-        Some(unsafe { self.fixed[self.len].assume_init() })
+        Some(self.fixed[self.len])
     }
 }
 

@@ -570,16 +570,11 @@ impl ShadowScratch {
 /// Stage: traces every shadow ray, stopping at the first blocker, and adds
 /// the radiance of the unblocked ones to their paths, in queue order.
 ///
-/// Eight consecutive shadow rays from one hit point (its rays to eight
+/// Eight consecutive shadow rays (mostly one hit point's rays to eight
 /// lights) go through the top level as a packet, and each lane traverses
 /// meshes alone: whole packets, also with rays binned by light, were
 /// measured slower than single rays, because the single-ray node test is
-/// SIMD across a node's eight children already. Groups from several
-/// points (path transport's one area-light sample per vertex: eight paths'
-/// rays) are traced one ray at a time: as a packet their top-level
-/// traversal cost more than the eight single rays (callgrind, glTF Cornell
-/// box, path: the shadow stage 1.2x the single rays' instructions). Both
-/// give the same answers.
+/// SIMD across a node's eight children already.
 ///
 /// In a scene with media under path transport (`through_media`) each
 /// shadow ray is followed one at a time through the media and boundaries
@@ -611,16 +606,13 @@ pub fn trace_shadow_rays(
         for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
             let j = range.start + k * LANES;
             let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(lanes.len() - 1)));
-            let t_max = &seg.t_max[j..j + lanes.len()];
-            if rays.iter().all(|r| r.origin == rays[0].origin) {
-                let blocked = scene.occluded_packet_with(&rays[..lanes.len()], t_max, false);
-                for (l, v) in lanes.iter_mut().enumerate() {
-                    *v = blocked & (1 << l) == 0;
-                }
-            } else {
-                for ((v, ray), &t) in lanes.iter_mut().zip(&rays).zip(t_max) {
-                    *v = !scene.occluded(ray, 0.0, t);
-                }
+            let blocked = scene.occluded_packet_with(
+                &rays[..lanes.len()],
+                &seg.t_max[j..j + lanes.len()],
+                false,
+            );
+            for (l, v) in lanes.iter_mut().enumerate() {
+                *v = blocked & (1 << l) == 0;
             }
         }
     });
