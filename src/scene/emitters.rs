@@ -326,7 +326,7 @@ impl EmitterTable {
             }
         };
         let pdf_area = self.pdf_area(instances, entry.instance, point);
-        let radiance = material.sample(uv).emission;
+        let radiance = material.emission_at(uv);
         (pdf_area > 0.0 && radiance.max_element() > 0.0 && point.is_finite()).then_some(
             EmitterSample {
                 point,

@@ -852,6 +852,18 @@ impl Material {
                 .is_some_and(|mr| mr.texture.is_some())
     }
 
+    /// Emitted radiance at texture coordinate `uv` (full-resolution
+    /// texture): [`Material::sample`]'s `emission` without evaluating the
+    /// rest of the surface (next-event estimation reads it at every light
+    /// sample).
+    #[inline]
+    pub fn emission_at(&self, uv: Vec2) -> Color {
+        match &self.emission_texture {
+            Some(t) => self.emission * t.sample_lod(uv, 0.0),
+            None => self.emission,
+        }
+    }
+
     /// Evaluates the material at texture coordinate `uv` (full-resolution
     /// textures).
     pub fn sample(&self, uv: Vec2) -> SurfaceSample {

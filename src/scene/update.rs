@@ -8,7 +8,7 @@ use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
 use crate::scene::render_scene::{
-    RenderScene, has_cutouts, has_dispersion, has_scattering, resolve_lights,
+    RenderScene, constant_surface, has_cutouts, has_dispersion, has_scattering, resolve_lights,
 };
 use glam::DVec3;
 
@@ -78,6 +78,7 @@ impl RenderScene {
         self.cutouts |= material.alpha.is_some();
         self.spectral |= material.dispersion.is_some();
         self.scattering |= material.has_scattering_interior();
+        self.surfaces.push(constant_surface(&material));
         self.materials.push(material);
         self.materials.len() as u32 - 1
     }
@@ -85,6 +86,7 @@ impl RenderScene {
     /// Replaces material `index`. Touches no BVH.
     pub fn set_material(&mut self, index: u32, material: Material) {
         self.emitters_stale = true;
+        self.surfaces[index as usize] = constant_surface(&material);
         self.materials[index as usize] = material;
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
@@ -109,6 +111,7 @@ impl RenderScene {
                 }
             }
         }
+        self.surfaces.swap_remove(index as usize);
         let removed = self.materials.swap_remove(index as usize);
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
@@ -205,6 +208,53 @@ mod tests {
     #[should_panic(expected = "instance 0 out of range (0 instances)")]
     fn removing_an_instance_from_an_empty_scene_names_the_index() {
         empty().swap_remove_instance(0);
+    }
+
+    /// What shading reads through [`RenderScene::surface`] follows every
+    /// material update: an untextured material's surface (evaluated once)
+    /// after a push, a replacement and a swap-removal, and a textured
+    /// material's surface at each point.
+    #[test]
+    fn surfaces_follow_material_updates() {
+        use crate::scene::material::{Material, Texture};
+        use glam::Vec2;
+        let plain = |r: f32| Material {
+            base_color: Color::new(r, 0.5, 0.25),
+            ..Default::default()
+        };
+        let checker = Material {
+            base_color_texture: Some(Texture::Checker {
+                scale: 2.0,
+                even: Color::ONE,
+                odd: Color::ZERO,
+            }),
+            ..Default::default()
+        };
+        let uvs = [Vec2::new(0.1, 0.1), Vec2::new(0.6, 0.1)];
+        let check = |scene: &RenderScene, i: u32, m: &Material| {
+            for uv in uvs {
+                assert_eq!(
+                    scene.surface(i, uv, 0.0),
+                    m.sample(uv),
+                    "material {i} at {uv}"
+                );
+            }
+        };
+        let mut scene = empty();
+        let a = scene.push_material(plain(0.9));
+        let b = scene.push_material(checker.clone());
+        check(&scene, a, &plain(0.9));
+        check(&scene, b, &checker);
+        // The checker's squares differ: the surface really is read per point.
+        assert_ne!(scene.surface(b, uvs[0], 0.0), scene.surface(b, uvs[1], 0.0));
+        scene.set_material(a, plain(0.2));
+        check(&scene, a, &plain(0.2));
+        scene.set_material(b, plain(0.7));
+        check(&scene, b, &plain(0.7));
+        scene.set_material(a, checker.clone());
+        check(&scene, a, &checker);
+        scene.swap_remove_material(a);
+        check(&scene, 0, &plain(0.7));
     }
 
     #[test]

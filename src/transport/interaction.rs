@@ -68,7 +68,7 @@ impl Interaction {
             ns,
             wo,
             front_face,
-            surface: scene.materials()[hit.material as usize].sample_lod(hit.uv, width_uv),
+            surface: scene.surface(hit.material, hit.uv, width_uv),
             cone,
         }
     }

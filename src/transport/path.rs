@@ -332,9 +332,8 @@ pub fn next_event(
     // One set of four per light sample: the point's pair first, then the
     // light number.
     let mut numbers = |i: u32| {
-        sampler.set_dimension(first + 4 * i);
-        let v = Vec2::new(sampler.next_f32(), sampler.next_f32());
-        (v, sampler.next_f32())
+        let [a, b, c, _] = sampler.set_of_four(first + 4 * i);
+        (Vec2::new(a, b), c)
     };
     let Some(env) = scene.environment() else {
         if scene.emitters().is_empty() {
@@ -584,10 +583,9 @@ pub fn continue_path(
     throughput: Color,
     sampler: &mut Sampler,
 ) -> Option<Continuation> {
-    sampler.set_dimension(bounce_dimension(settings, depth) + 4 * settings.light_samples);
-    let u = Vec2::new(sampler.next_f32(), sampler.next_f32());
-    let u_lobe = sampler.next_f32();
-    let u_rr = sampler.next_f32();
+    let [ux, uy, u_lobe, u_rr] =
+        sampler.set_of_four(bounce_dimension(settings, depth) + 4 * settings.light_samples);
+    let u = Vec2::new(ux, uy);
     if depth >= settings.max_depth {
         return None;
     }
