@@ -104,14 +104,21 @@ impl Sampler {
         self.dimension = d.wrapping_add(4);
         if self.sobol {
             let set = d / 4;
-            if set != self.cached_set {
-                let seed = mix64(self.pixel_key ^ set as u64);
-                self.cached = sobol_burley::sample_4d(self.sample, 0, (seed >> 32) as u32);
-                self.cached_set = set;
-            }
+            self.cache_set(set);
             return self.cached;
         }
         std::array::from_fn(|k| self.hashed(d.wrapping_add(k as u32)))
+    }
+
+    /// Makes Sobol set `set` the cached one (each set has its own scramble
+    /// and index shuffle: Burley's padding).
+    #[inline(always)]
+    fn cache_set(&mut self, set: u32) {
+        if set != self.cached_set {
+            let seed = mix64(self.pixel_key ^ set as u64);
+            self.cached = sobol_burley::sample_4d(self.sample, 0, (seed >> 32) as u32);
+            self.cached_set = set;
+        }
     }
 
     /// The hash sampler's number for dimension `d`.
@@ -131,11 +138,7 @@ impl Sampler {
             // Dimension d is component d % 4 of the set d / 4; each set has
             // its own scramble and index shuffle (Burley's padding).
             let set = d / 4;
-            if set != self.cached_set {
-                let seed = mix64(self.pixel_key ^ set as u64);
-                self.cached = sobol_burley::sample_4d(self.sample, 0, (seed >> 32) as u32);
-                self.cached_set = set;
-            }
+            self.cache_set(set);
             return self.cached[(d % 4) as usize];
         }
         self.hashed(d)
