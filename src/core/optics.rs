@@ -113,9 +113,21 @@ pub fn offset_origin(p: Vec3A, n: Vec3A) -> Vec3A {
 /// by the point's own ulps (seen: acne on a cone 10 units from the camera).
 #[inline]
 pub fn offset_origin_relative(p: Vec3A, n: Vec3A) -> Vec3A {
+    offset_origin_scaled(p, n, 0.0)
+}
+
+/// [`offset_origin_relative`] for a point whose error is bounded by the
+/// ulps of `scale` when that is larger than the point's own largest
+/// coordinate: a point computed as `M p + t` near the render frame's
+/// origin from an object point and a translation of magnitude 1000 (the
+/// top of a ground sphere of radius 1000 centred 1000 below the origin)
+/// carries rounding errors of ulps of 1000, not of its own small
+/// coordinates ([`Interaction::offset_scale`](crate::transport::interaction::Interaction::offset_scale)).
+#[inline]
+pub fn offset_origin_scaled(p: Vec3A, n: Vec3A, scale: f32) -> Vec3A {
     // At least one ulp of the largest coordinate (also for denormals and
     // the exact origin, where the error is zero anyway).
-    let magnitude = p.abs().max_element().max(f32::MIN_POSITIVE);
+    let magnitude = p.abs().max_element().max(scale).max(f32::MIN_POSITIVE);
     let q = p + n * (OFFSET_ULPS * f32::EPSILON * magnitude);
     if q.is_finite() { q } else { p }
 }

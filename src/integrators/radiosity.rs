@@ -13,7 +13,6 @@ use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_rays, film_sample};
 use crate::core::math::{Color, Ray, max_component};
-use crate::core::optics::offset_origin_relative;
 use crate::core::rng::Sampler;
 use crate::core::sampling::cosine_hemisphere;
 use crate::core::settings::RenderSettings;
@@ -60,7 +59,7 @@ pub fn trace(
         if view == ViewMode::Gather {
             radiance += it.surface.emission;
             let k = settings.radiosity.gather_rays;
-            let origin = offset_origin_relative(it.point, it.ng) + shift;
+            let origin = it.offset(it.ng) + shift;
             let mut sum = Color::ZERO;
             for _ in 0..k {
                 let u = glam::Vec2::new(sampler.next_f32(), sampler.next_f32());

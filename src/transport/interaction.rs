@@ -34,6 +34,10 @@ pub struct Interaction {
     /// The ray cone at the hit: what a perfectly specular reflection or
     /// refraction carries on ([`RayCone::NONE`] after other bounces).
     pub cone: RayCone,
+    /// A magnitude whose ulps bound the rounding error of `point` when it
+    /// is larger than the point's own coordinates (see
+    /// [`Interaction::offset`]); 0 when the point's own ulps do.
+    pub offset_scale: f32,
 }
 
 impl Interaction {
@@ -70,7 +74,18 @@ impl Interaction {
             front_face,
             surface: scene.surface(hit.material, hit.uv, width_uv),
             cone,
+            offset_scale: offset_scale(scene, hit),
         }
+    }
+
+    /// The origin of a new ray leaving the surface on the side of `n`
+    /// (`ng` or `-ng`): the point moved off the surface by a few ulps of
+    /// the larger of its own largest coordinate and
+    /// [`Interaction::offset_scale`]
+    /// ([`offset_origin_scaled`](crate::core::optics::offset_origin_scaled)).
+    #[inline]
+    pub fn offset(&self, n: Vec3A) -> Vec3A {
+        crate::core::optics::offset_origin_scaled(self.point, n, self.offset_scale)
     }
 
     /// True when the surface has a diffuse or glossy lobe that point lights
@@ -79,6 +94,28 @@ impl Interaction {
     pub fn is_lit_by_lights(&self) -> bool {
         self.surface.diffuse.max_element() > 0.0 || self.surface.specular.max_element() > 0.0
     }
+}
+
+/// The magnitude whose ulps bound the rounding error of `hit.point` when
+/// cancellation made the point small: the point is `M p + t` (object
+/// point `p`, the instance's render-frame translation `t`), whose error is
+/// a few ulps of `|M p| + |t|` per coordinate. Half of
+/// `max|hit.point - t| + max|t|` (at least `max|M p| + max|t|` over 2): for
+/// an instance at the origin, or wherever the point is not much smaller
+/// than the terms it was summed from, this is below the point's own
+/// magnitude and changes nothing; at the top of a sphere of radius 1000
+/// centred 1000 below the origin it is 1000, where the point's own
+/// coordinates are near 0 (the shadow rays of such a ground sphere found
+/// the sphere again at grazing views: a Lambertian ground of albedo 0.8
+/// under a white sky rendered 0.56 at 80 degrees).
+#[inline]
+fn offset_scale(scene: &RenderScene, hit: &Hit) -> f32 {
+    let Some(inst) = scene.instances().get(hit.instance as usize) else {
+        return 0.0;
+    };
+    let t = inst.transform.to_world.translation;
+    let s = 0.5 * ((hit.point - t).abs().max_element() + t.abs().max_element());
+    if s.is_finite() { s } else { 0.0 }
 }
 
 /// Lambert plus normalised Blinn-Phong: the BRDF of the local model,

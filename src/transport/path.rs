@@ -21,9 +21,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3A};
 
 use crate::core::math::{Color, Ray, luminance, max_component, orthonormal_basis};
-use crate::core::optics::{
-    OFFSET_ULPS, fresnel_dielectric, offset_origin_relative, reflect, refract,
-};
+use crate::core::optics::{OFFSET_ULPS, fresnel_dielectric, reflect, refract};
 use crate::core::rng::Sampler;
 use crate::core::sampling::{cosine_hemisphere, power_heuristic};
 use crate::core::settings::{RenderSettings, Transport};
@@ -189,7 +187,7 @@ pub fn sample_bsdf(
             return None;
         }
         return Some(BsdfSample {
-            ray: Ray::new(offset_origin_relative(it.point, it.ng), wi),
+            ray: Ray::new(it.offset(it.ng), wi),
             weight: f / pdf,
             pdf,
             kind: RayKind::Reflection,
@@ -209,7 +207,7 @@ pub fn sample_bsdf(
             return None;
         }
         return Some(BsdfSample {
-            ray: Ray::new(offset_origin_relative(it.point, it.ng), mirror_dir()),
+            ray: Ray::new(it.offset(it.ng), mirror_dir()),
             weight: s.mirror / lobes.mirror,
             pdf: 0.0,
             kind: RayKind::Reflection,
@@ -228,14 +226,14 @@ pub fn sample_bsdf(
         && t.dot(it.ng) < 0.0
     {
         return Some(BsdfSample {
-            ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
+            ray: Ray::new(it.offset(-it.ng), t),
             weight: s.transmission_tint * base,
             pdf: 0.0,
             kind: RayKind::Refraction,
         });
     }
     Some(BsdfSample {
-        ray: Ray::new(offset_origin_relative(it.point, it.ng), mirror_dir()),
+        ray: Ray::new(it.offset(it.ng), mirror_dir()),
         weight: Color::splat(base),
         pdf: 0.0,
         kind: RayKind::Reflection,
@@ -420,7 +418,7 @@ fn area_light_sample(
     // fixed offset along the normal was not enough (seen: 11% of a
     // sphere light's visible samples lost to self-shadowing, more when
     // the light sat nearer the render origin than the receiver).
-    let origin = offset_origin_relative(it.point, it.ng);
+    let origin = it.offset(it.ng);
     let t_light = (ls.point - origin).dot(wi);
     let scale = ls
         .point
@@ -472,7 +470,7 @@ fn environment_sample(
         return None;
     }
     Some(ShadowQuery {
-        ray: Ray::new(offset_origin_relative(it.point, it.ng), wi),
+        ray: Ray::new(it.offset(it.ng), wi),
         t_max: f32::INFINITY,
         radiance,
     })

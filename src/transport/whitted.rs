@@ -4,7 +4,7 @@
 use glam::Vec3A;
 
 use crate::core::math::{Color, Ray};
-use crate::core::optics::{fresnel_dielectric, offset_origin_relative, reflect, refract};
+use crate::core::optics::{fresnel_dielectric, reflect, refract};
 use crate::scene::light::{LightSample, WorldLight};
 use crate::transport::interaction::{Interaction, RayKind, Secondary, ShadowQuery, brdf_cos};
 
@@ -37,7 +37,7 @@ pub fn direct_light_with(
     if !(radiance.max_element() > 0.0) {
         return None;
     }
-    let origin = offset_origin_relative(it.point, it.ng);
+    let origin = it.offset(it.ng);
     let t_max = if distance.is_finite() {
         // Distance from the offset origin, shortened by a relative margin
         // so the light's own position is never counted as a blocker.
@@ -73,7 +73,7 @@ pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
             // The refracted ray must leave on the far side of the true surface.
             if t.dot(it.ng) < 0.0 {
                 refraction = Some(Secondary {
-                    ray: Ray::new(offset_origin_relative(it.point, -it.ng), t),
+                    ray: Ray::new(it.offset(-it.ng), t),
                     weight: s.transmission_tint * (s.transmission * (1.0 - f)),
                     kind: RayKind::Refraction,
                 });
@@ -88,7 +88,7 @@ pub fn scatter(it: &Interaction) -> [Option<Secondary>; 2] {
             r = reflect(d, it.ng);
         }
         Secondary {
-            ray: Ray::new(offset_origin_relative(it.point, it.ng), r),
+            ray: Ray::new(it.offset(it.ng), r),
             weight: reflect_w,
             kind: RayKind::Reflection,
         }
