@@ -25,20 +25,6 @@ use crate::core::math::Ray;
 /// each ray, for the same number of leaf visits.
 pub const LEAF_TRIANGLES: u32 = 8;
 
-/// Meshes of at least this many vertices are checked on the worker
-/// threads.
-const PARALLEL_VERTICES: usize = 1 << 14;
-
-/// The first index of `items` where `f` holds (on the worker threads for
-/// long slices).
-fn first_where<T: Sync>(items: &[T], f: impl Fn(&T) -> bool + Sync + Send) -> Option<usize> {
-    if items.len() >= PARALLEL_VERTICES {
-        items.par_iter().position_first(f)
-    } else {
-        items.iter().position(f)
-    }
-}
-
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
 use crate::geometry::triangle::Tri4;
@@ -175,10 +161,14 @@ impl Mesh {
         let mut phases = crate::accel::bvh8::Phases::start();
         let name = name.into();
         let n = data.positions.len();
-        if let Some(i) = first_where(&data.positions, |p| !p.is_finite()) {
+        if let Some(i) = data.positions.iter().position(|p| !p.is_finite()) {
             return Err(format!("vertex {i} has a non-finite position"));
         }
-        if let Some(i) = first_where(&data.positions, |p| p.abs().max_element() > MAX_COORDINATE) {
+        if let Some(i) = data
+            .positions
+            .iter()
+            .position(|p| p.abs().max_element() > MAX_COORDINATE)
+        {
             return Err(format!(
                 "vertex {i} lies farther than {MAX_COORDINATE:e} from the origin"
             ));
@@ -187,7 +177,7 @@ impl Mesh {
             if normals.len() != n {
                 return Err(format!("{} normals for {} vertices", normals.len(), n));
             }
-            if let Some(i) = first_where(normals, |p| !p.is_finite()) {
+            if let Some(i) = normals.iter().position(|p| !p.is_finite()) {
                 return Err(format!("vertex {i} has a non-finite normal"));
             }
         }
@@ -199,22 +189,22 @@ impl Mesh {
                     n
                 ));
             }
-            if let Some(i) = first_where(uvs, |p| !p.is_finite()) {
+            if let Some(i) = uvs.iter().position(|p| !p.is_finite()) {
                 return Err(format!("vertex {i} has non-finite texture coordinates"));
             }
         }
-        if let Some(i) = first_where(&data.indices, |t| t.iter().any(|&v| v as usize >= n)) {
-            let t = data.indices[i];
+        if let Some((i, t)) = data
+            .indices
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&v| v as usize >= n))
+        {
             return Err(format!(
                 "triangle {i} uses vertex index {} but there are only {n} vertices",
                 t.iter().max().unwrap()
             ));
         }
-        let positions: Vec<Vec3A> = if n >= PARALLEL_VERTICES {
-            data.positions.par_iter().map(|&p| p.into()).collect()
-        } else {
-            data.positions.iter().map(|&p| p.into()).collect()
-        };
+        let positions: Vec<Vec3A> = data.positions.iter().map(|&p| p.into()).collect();
         let normals = match mode {
             NormalMode::Flat => None,
             NormalMode::Smooth => Some(match data.normals {
@@ -297,11 +287,10 @@ impl Mesh {
         phases.lap("structure");
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
-        // (The corners are the triangles' positions in the same order.)
-        for c in &corners {
-            for &p in c {
-                lo = lo.min(p);
-                hi = hi.max(p);
+        for t in &triangles {
+            for &i in t {
+                lo = lo.min(positions[i as usize]);
+                hi = hi.max(positions[i as usize]);
             }
         }
         Ok(Self {
