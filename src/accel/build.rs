@@ -13,7 +13,7 @@ pub enum BuildQuality {
     VeryFast,
     /// `fast_build`.
     Fast,
-    /// `medium_build`, the default.
+    /// `medium_build`, the default (mesh BVHs: see [`BuildQuality::mesh_params`]).
     #[default]
     Medium,
     /// `slow_build`.
@@ -33,6 +33,25 @@ impl BuildQuality {
             BuildQuality::Slow => BvhBuildParams::slow_build(),
             BuildQuality::VerySlow => BvhBuildParams::very_slow_build(),
         }
+    }
+}
+
+impl BuildQuality {
+    /// The obvhs parameters of mesh BVHs of this preset: [`Self::params`],
+    /// except that `Medium` looks for PLOC merge partners among the 6
+    /// nearest clusters on either side (obvhs's `Low` search distance)
+    /// instead of 14. On the traversal-anchors meshes this takes about a
+    /// fifth off the build's instructions (100k triangles, one thread,
+    /// callgrind: 271 M -> 217 M) and traversal did not slow down: per ray
+    /// instructions -3.4% / -0.8% (100k, camera / bounce rays) and -7.2% /
+    /// -0.3% (1M); CPU-time Mrays/s of single rays, packets and streams
+    /// within 0.7% on 100k and 1-8% faster on 1M.
+    pub fn mesh_params(self) -> BvhBuildParams {
+        let mut params = self.params();
+        if self == BuildQuality::Medium {
+            params.ploc_search_distance = obvhs::ploc::PlocSearchDistance::Low;
+        }
+        params
     }
 }
 

@@ -8,9 +8,12 @@
 //! primitives side by side for one SIMD test (see
 //! [`crate::geometry::triangle::Tri4`]).
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use glam::Vec3A;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
+use rayon::prelude::*;
 
 /// Children per node.
 pub const WIDTH: usize = 8;
@@ -58,6 +61,19 @@ impl Node8 {
         self.child[c] = child;
     }
 
+    /// Largest finite coordinate magnitude of the child boxes.
+    fn magnitude(&self) -> f32 {
+        let mut mag = 0.0f32;
+        for row in &self.planes {
+            for &v in row {
+                if v.is_finite() {
+                    mag = mag.max(v.abs());
+                }
+            }
+        }
+        mag
+    }
+
     /// The box of child `c` (empty slots give an inverted box).
     pub fn child_box(&self, c: usize) -> (Vec3A, Vec3A) {
         let p = |a: usize| self.planes[a][c];
@@ -101,54 +117,262 @@ impl Bvh8 {
     /// with one primitive per leaf, collapsed into 8-wide nodes whose
     /// leaves gather subtrees of at most `max_leaf` primitives (see
     /// [`Self::from_bvh2`]).
-    pub fn build(boxes: &[Aabb], mut params: obvhs::BvhBuildParams, max_leaf: u32) -> Self {
+    pub fn build(boxes: &[Aabb], params: obvhs::BvhBuildParams, max_leaf: u32) -> Self {
         if boxes.is_empty() {
             return Self::default();
         }
-        params.pre_split = false;
-        // Leaves of one primitive: the collapse gathers small subtrees.
-        params.max_prims_per_leaf = 1;
-        // With leaves of one primitive obvhs's leaf collapse does nothing,
-        // so its second reinsertion pass would only repeat the first.
-        params.post_collapse_reinsertion_batch_ratio_multiplier = 0.0;
-        let bvh2 = obvhs::bvh2::builder::build_bvh2(boxes, params, &mut Default::default());
-        Self::from_bvh2(&bvh2, boxes, max_leaf)
+        let mut phases = Phases::start();
+        // obvhs's `build_bvh2` with leaves of one primitive (the collapse
+        // gathers small subtrees), step by step so that the phases can be
+        // timed: PLOC, then one reinsertion pass (obvhs's leaf collapse
+        // does nothing with leaves of one primitive, so its second
+        // reinsertion pass would only repeat the first). No pre-splits.
+        let mut bvh2 = obvhs::ploc::PlocBuilder::with_capacity(boxes.len()).build(
+            params.ploc_search_distance,
+            boxes,
+            (0..boxes.len() as u32).collect(),
+            params.sort_precision,
+            params.search_depth_threshold,
+        );
+        phases.lap("ploc");
+        obvhs::bvh2::reinsertion::ReinsertionOptimizer::default().run(
+            &mut bvh2,
+            params.reinsertion_batch_ratio,
+            None,
+        );
+        phases.lap("reinsertion");
+        let out = Self::from_bvh2(&bvh2, boxes, max_leaf);
+        phases.lap("collapse");
+        out
     }
 
     /// Collapses `bvh2` (built over `boxes`) into 8-wide nodes: each node
     /// takes the two children of a binary node and keeps opening the
     /// inner child of largest surface area times square root of its
     /// primitive count until it has eight. A binary
-    /// subtree of at most `max_leaf` primitives becomes one leaf; binary
+    /// subtree of at most `max_leaf` primitives becomes one leaf, its
+    /// primitives in increasing order; binary
     /// leaves of more than `max_leaf` primitives are split into leaves of
     /// `max_leaf` under nodes of their own (boxed by `boxes`, the boxes
     /// the tree was built over, or by the binary leaf's box when `boxes`
     /// is empty).
+    ///
+    /// Large trees are collapsed subtree by subtree on the worker threads
+    /// and put together in the order of the serial collapse, so the
+    /// result does not depend on the number of threads.
     pub fn from_bvh2(bvh2: &Bvh2, boxes: &[Aabb], max_leaf: u32) -> Self {
+        Self::collapse(bvh2, boxes, max_leaf, bvh2.nodes.len() >= PARALLEL_NODES)
+    }
+
+    /// [`Self::from_bvh2`], by subtree on the worker threads or not.
+    fn collapse(bvh2: &Bvh2, boxes: &[Aabb], max_leaf: u32, parallel: bool) -> Self {
         let max_leaf = max_leaf.max(1);
         let mut out = Self::default();
         if bvh2.nodes.is_empty() {
             return out;
         }
-        // A child that becomes a leaf: a binary leaf, or a small subtree.
-        let counts = subtree_counts(bvh2);
-        let leafish = |i: u32| counts[i as usize] <= max_leaf;
-        let mut prims = Vec::new();
+        let counts = subtree_counts(bvh2, parallel);
+        let c = Collapse {
+            bvh2,
+            counts: &counts,
+            boxes,
+            max_leaf,
+        };
         out.nodes.push(Node8::BLANK);
-        // (binary node, node slot, level)
-        let mut work: Vec<(u32, u32, usize)> = Vec::new();
-        if leafish(0) {
+        if c.leafish(0) {
+            let mut prims = Vec::new();
             gather(bvh2, 0, &mut prims);
             out.place_leaf(0, 0, &bvh2.nodes[0].aabb, &prims, boxes, max_leaf, 1);
+        } else if !parallel {
+            c.run(&mut out, (0, 0, 1), 0, |_, _| {});
         } else {
-            work.push((0, 0, 1));
+            // Subtrees of at most `split` primitives are collapsed apart;
+            // the threshold depends on the tree only.
+            let split = (c.count(0) / SUBTREES).max(max_leaf + 1);
+            // The serial collapse reaches them in this order.
+            let mut apart = Vec::new();
+            let mut scratch = Self {
+                nodes: vec![Node8::BLANK],
+                ..Self::default()
+            };
+            c.run(&mut scratch, (0, 0, 1), split, |_, item| apart.push(item));
+            let parts: Vec<Self> = apart
+                .par_iter()
+                .map(|&(b, _, level)| {
+                    let mut part = Self::default();
+                    part.nodes.push(Node8::BLANK);
+                    c.run(&mut part, (b, 0, level), 0, |_, _| {});
+                    part
+                })
+                .collect();
+            let sum = |f: fn(&Self) -> usize| parts.iter().map(f).sum::<usize>();
+            out.nodes.reserve(2 * apart.len() + sum(|p| p.nodes.len()));
+            out.leaves
+                .reserve(2 * apart.len() + sum(|p| p.leaves.len()));
+            out.prims.reserve(bvh2.primitive_indices.len());
+            let mut next = parts.into_iter();
+            c.run(&mut out, (0, 0, 1), split, |out, (_, slot, _)| {
+                out.append(slot, next.next().expect("one part per subtree"))
+            });
         }
+        out.magnitude = if parallel {
+            out.nodes
+                .par_iter()
+                .map(Node8::magnitude)
+                .reduce(|| 0.0, f32::max)
+        } else {
+            out.nodes.iter().map(Node8::magnitude).fold(0.0, f32::max)
+        };
+        out
+    }
+
+    /// Puts `part`, the collapse of a subtree whose root is node `slot`,
+    /// behind what is already here.
+    fn append(&mut self, slot: u32, part: Self) {
+        // Part node `k` >= 1 becomes node `node_base + k`.
+        let node_base = self.nodes.len() as u32 - 1;
+        let leaf_base = self.leaves.len() as u32;
+        let prim_base = self.prims.len() as u32;
+        let shift = |mut n: Node8| {
+            for r in &mut n.child {
+                if *r == EMPTY {
+                } else if *r & LEAF != 0 {
+                    *r += leaf_base;
+                } else {
+                    *r += node_base;
+                }
+            }
+            n
+        };
+        self.nodes[slot as usize] = shift(part.nodes[0]);
+        self.nodes.extend(part.nodes[1..].iter().map(|&n| shift(n)));
+        self.leaves.extend(part.leaves.iter().map(|l| Leaf {
+            first: l.first + prim_base,
+            count: l.count,
+        }));
+        self.prims.extend_from_slice(&part.prims);
+        self.depth = self.depth.max(part.depth);
+    }
+
+    /// Puts the primitives `prims` into child `c` of node `slot` as one
+    /// leaf, or, when there are more than `max_leaf`, as leaves of
+    /// `max_leaf` under a node of their own.
+    #[allow(clippy::too_many_arguments)]
+    fn place_leaf(
+        &mut self,
+        slot: u32,
+        c: usize,
+        b: &Aabb,
+        prims: &[u32],
+        boxes: &[Aabb],
+        max_leaf: u32,
+        level: usize,
+    ) {
+        let count = prims.len() as u32;
+        if count <= max_leaf {
+            let leaf = self.leaves.len() as u32;
+            self.leaves.push(Leaf {
+                first: self.prims.len() as u32,
+                count,
+            });
+            let at = self.prims.len();
+            self.prims.extend_from_slice(prims);
+            self.prims[at..].sort_unstable();
+            self.nodes[slot as usize].set(c, b, LEAF | leaf);
+            self.depth = self.depth.max(level);
+            return;
+        }
+        // Too many for one leaf (degenerate input: obvhs's collapse keeps
+        // to the limit): chunks of `max_leaf` under a node of their own,
+        // eight chunks per node, recursively.
+        let index = self.nodes.len() as u32;
+        self.nodes.push(Node8::BLANK);
+        self.nodes[slot as usize].set(c, b, index);
+        let per_child = count.div_ceil(WIDTH as u32).max(max_leaf);
+        let per_child = (per_child.div_ceil(max_leaf) * max_leaf) as usize;
+        for (k, chunk) in prims.chunks(per_child).enumerate() {
+            // Without the primitives' boxes, the whole leaf's box (larger,
+            // still conservative).
+            let mut bb = if boxes.is_empty() { *b } else { Aabb::empty() };
+            for &p in chunk {
+                if let Some(pb) = boxes.get(p as usize) {
+                    bb = bb.union(pb);
+                }
+            }
+            self.place_leaf(index, k, &bb, chunk, boxes, max_leaf, level + 1);
+        }
+    }
+}
+
+/// Wall-clock phase timer printing to stderr when `PRISM_BUILD_PHASES`
+/// is set (build profiling).
+pub(crate) struct Phases(Option<std::time::Instant>);
+
+impl Phases {
+    pub(crate) fn start() -> Self {
+        static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        let on = *ON.get_or_init(|| std::env::var_os("PRISM_BUILD_PHASES").is_some());
+        Self(on.then(std::time::Instant::now))
+    }
+
+    pub(crate) fn lap(&mut self, name: &str) {
+        if let Some(t) = &mut self.0 {
+            let now = std::time::Instant::now();
+            eprintln!("phase {name}: {:.2} ms", (now - *t).as_secs_f64() * 1e3);
+            *t = now;
+        }
+    }
+}
+
+/// Trees of at least this many binary nodes are collapsed on the worker
+/// threads.
+const PARALLEL_NODES: usize = 1 << 15;
+
+/// About how many subtrees a parallel collapse cuts the tree into.
+const SUBTREES: u32 = 64;
+
+/// What the collapse reads.
+struct Collapse<'a> {
+    bvh2: &'a Bvh2,
+    counts: &'a [AtomicU32],
+    boxes: &'a [Aabb],
+    max_leaf: u32,
+}
+
+impl Collapse<'_> {
+    fn count(&self, i: u32) -> u32 {
+        self.counts[i as usize].load(Ordering::Relaxed)
+    }
+
+    /// A child that becomes a leaf: a binary leaf, or a small subtree.
+    fn leafish(&self, i: u32) -> bool {
+        self.count(i) <= self.max_leaf
+    }
+
+    /// The collapse from `start` = (binary node, node slot in `out`,
+    /// level), depth first. Pending inner children with at most `split`
+    /// primitives are handed to `apart(out, item)` instead of being
+    /// collapsed.
+    fn run(
+        &self,
+        out: &mut Bvh8,
+        start: (u32, u32, usize),
+        split: u32,
+        mut apart: impl FnMut(&mut Bvh8, (u32, u32, usize)),
+    ) {
+        let bvh2 = self.bvh2;
+        let mut prims = Vec::new();
+        let mut work = vec![start];
         while let Some((b, slot, level)) = work.pop() {
+            if b != start.0 && self.count(b) <= split {
+                apart(out, (b, slot, level));
+                continue;
+            }
             out.depth = out.depth.max(level);
             let node = &bvh2.nodes[b as usize];
             // (binary node, becomes a leaf, half area)
             let kid = |i: u32| {
-                let leaf = leafish(i);
+                let leaf = self.leafish(i);
                 // Opening priority: surface area times the square root of
                 // the primitive count. Area alone (the usual greedy rule)
                 // leaves many nodes of two small children at the bottom;
@@ -159,7 +383,7 @@ impl Bvh8 {
                 let area = if leaf {
                     f32::NEG_INFINITY
                 } else {
-                    bvh2.nodes[i as usize].aabb.half_area() * (counts[i as usize] as f32).sqrt()
+                    bvh2.nodes[i as usize].aabb.half_area() * (self.count(i) as f32).sqrt()
                 };
                 (i, leaf, area)
             };
@@ -187,7 +411,15 @@ impl Bvh8 {
                 if leaf {
                     prims.clear();
                     gather(bvh2, kid, &mut prims);
-                    out.place_leaf(slot, c, &kn.aabb, &prims, boxes, max_leaf, level + 1);
+                    out.place_leaf(
+                        slot,
+                        c,
+                        &kn.aabb,
+                        &prims,
+                        self.boxes,
+                        self.max_leaf,
+                        level + 1,
+                    );
                 } else {
                     let index = out.nodes.len() as u32;
                     out.nodes.push(Node8::BLANK);
@@ -196,87 +428,57 @@ impl Bvh8 {
                 }
             }
         }
-        let mut mag = 0.0f32;
-        for n in &out.nodes {
-            for row in &n.planes {
-                for &v in row {
-                    if v.is_finite() {
-                        mag = mag.max(v.abs());
-                    }
-                }
-            }
-        }
-        out.magnitude = mag;
-        out
-    }
-
-    /// Puts the primitives `prims` into child `c` of node `slot` as one
-    /// leaf, or, when there are more than `max_leaf`, as leaves of
-    /// `max_leaf` under a node of their own.
-    #[allow(clippy::too_many_arguments)]
-    fn place_leaf(
-        &mut self,
-        slot: u32,
-        c: usize,
-        b: &Aabb,
-        prims: &[u32],
-        boxes: &[Aabb],
-        max_leaf: u32,
-        level: usize,
-    ) {
-        let count = prims.len() as u32;
-        if count <= max_leaf {
-            let leaf = self.leaves.len() as u32;
-            self.leaves.push(Leaf {
-                first: self.prims.len() as u32,
-                count,
-            });
-            self.prims.extend_from_slice(prims);
-            self.nodes[slot as usize].set(c, b, LEAF | leaf);
-            self.depth = self.depth.max(level);
-            return;
-        }
-        // Too many for one leaf (degenerate input: obvhs's collapse keeps
-        // to the limit): chunks of `max_leaf` under a node of their own,
-        // eight chunks per node, recursively.
-        let index = self.nodes.len() as u32;
-        self.nodes.push(Node8::BLANK);
-        self.nodes[slot as usize].set(c, b, index);
-        let per_child = count.div_ceil(WIDTH as u32).max(max_leaf);
-        let per_child = (per_child.div_ceil(max_leaf) * max_leaf) as usize;
-        for (k, chunk) in prims.chunks(per_child).enumerate() {
-            // Without the primitives' boxes, the whole leaf's box (larger,
-            // still conservative).
-            let mut bb = if boxes.is_empty() { *b } else { Aabb::empty() };
-            for &p in chunk {
-                if let Some(pb) = boxes.get(p as usize) {
-                    bb = bb.union(pb);
-                }
-            }
-            self.place_leaf(index, k, &bb, chunk, boxes, max_leaf, level + 1);
-        }
     }
 }
 
-/// Primitives below every binary node.
-fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
-    let mut counts = vec![0u32; bvh2.nodes.len()];
+/// Primitives below every binary node (on the worker threads when
+/// `parallel`, by subtree).
+fn subtree_counts(bvh2: &Bvh2, parallel: bool) -> Vec<AtomicU32> {
+    let n = bvh2.nodes.len();
+    if !parallel {
+        let counts: Vec<AtomicU32> = (0..n).map(|_| AtomicU32::new(0)).collect();
+        counts_below(bvh2, 0, &counts);
+        return counts;
+    }
+    let counts: Vec<AtomicU32> = (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect();
+    // The top levels split between threads, each subtree below counted
+    // serially.
+    fn split(bvh2: &Bvh2, i: u32, depth: u32, counts: &[AtomicU32]) -> u32 {
+        let n = &bvh2.nodes[i as usize];
+        if depth == 0 || n.is_leaf() {
+            return counts_below(bvh2, i, counts);
+        }
+        let (a, b) = rayon::join(
+            || split(bvh2, n.first_index, depth - 1, counts),
+            || split(bvh2, n.first_index + 1, depth - 1, counts),
+        );
+        counts[i as usize].store(a + b, Ordering::Relaxed);
+        a + b
+    }
+    split(bvh2, 0, 6, &counts);
+    counts
+}
+
+/// Fills `counts` below binary node `root` and returns its count.
+fn counts_below(bvh2: &Bvh2, root: u32, counts: &[AtomicU32]) -> u32 {
+    let get = |i: u32| counts[i as usize].load(Ordering::Relaxed);
     // Post-order without recursion: (node, children done).
-    let mut stack = vec![(0u32, false)];
+    let mut stack = vec![(root, false)];
     while let Some((i, done)) = stack.pop() {
         let n = &bvh2.nodes[i as usize];
-        if n.is_leaf() {
-            counts[i as usize] = n.prim_count;
+        let c = if n.is_leaf() {
+            n.prim_count
         } else if done {
-            counts[i as usize] =
-                counts[n.first_index as usize] + counts[n.first_index as usize + 1];
+            get(n.first_index) + get(n.first_index + 1)
         } else {
             stack.push((i, true));
             stack.push((n.first_index, false));
             stack.push((n.first_index + 1, false));
-        }
+            continue;
+        };
+        counts[i as usize].store(c, Ordering::Relaxed);
     }
-    counts
+    get(root)
 }
 
 /// Appends the primitives below binary node `i`, left to right.
@@ -354,6 +556,47 @@ mod tests {
             );
             assert!(seen.iter().all(|&s| s == 1), "n = {n}");
             assert!(bvh.depth >= 1);
+        }
+    }
+
+    /// The collapse by subtree on the worker threads gives the serial
+    /// collapse's tree, node for node, for any number of threads.
+    #[test]
+    fn parallel_collapse_is_the_serial_collapse() {
+        let boxes = random_boxes(3000, 11);
+        let bvh2 = obvhs::bvh2::builder::build_bvh2(
+            &boxes,
+            obvhs::BvhBuildParams {
+                max_prims_per_leaf: 1,
+                ..obvhs::BvhBuildParams::medium_build()
+            },
+            &mut Default::default(),
+        );
+        let key = |b: &Bvh8| {
+            let nodes: Vec<_> = b
+                .nodes
+                .iter()
+                .map(|n| (n.child, n.planes.map(|r| r.map(f32::to_bits))))
+                .collect();
+            (
+                nodes,
+                b.leaves.clone(),
+                b.prims.clone(),
+                b.depth,
+                b.magnitude,
+            )
+        };
+        for max_leaf in [1, 4, 8] {
+            let serial = Bvh8::collapse(&bvh2, &boxes, max_leaf, false);
+            assert!(serial.nodes.len() > 100);
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let parallel = pool.install(|| Bvh8::collapse(&bvh2, &boxes, max_leaf, true));
+                assert!(key(&parallel) == key(&serial), "max_leaf {max_leaf}");
+            }
         }
     }
 

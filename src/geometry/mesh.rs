@@ -158,6 +158,7 @@ impl Mesh {
         quality: BuildQuality,
         accel: Accel,
     ) -> Result<Self, String> {
+        let mut phases = crate::accel::bvh8::Phases::start();
         let name = name.into();
         let n = data.positions.len();
         if let Some(i) = data.positions.iter().position(|p| !p.is_finite()) {
@@ -215,6 +216,7 @@ impl Mesh {
             }),
         };
 
+        phases.lap("validate");
         let start = Instant::now();
         let bvh = if accel == Accel::Bvh {
             // The per-triangle passes run on the worker threads, like the build.
@@ -226,13 +228,13 @@ impl Mesh {
                     padded_aabb(a.min(b).min(c), a.max(b).max(c))
                 })
                 .collect();
-            let mut bvh = Bvh8::build(&boxes, quality.params(), LEAF_TRIANGLES);
+            phases.lap("boxes");
+            // Each leaf's triangles come in input order: of equal-t hits in
+            // one leaf block the first lane, hence the lowest input index,
+            // wins.
+            let bvh = Bvh8::build(&boxes, quality.mesh_params(), LEAF_TRIANGLES);
+            phases.lap("bvh8");
             MESH_BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            // Each leaf's triangles in input order: of equal-t hits in one
-            // leaf block the first lane, hence the lowest input index, wins.
-            for l in &bvh.leaves {
-                bvh.prims[l.first as usize..(l.first + l.count) as usize].sort_unstable();
-            }
             bvh
         } else {
             Bvh8 {
@@ -251,20 +253,25 @@ impl Mesh {
             .collect();
         // Two blocks per leaf, side by side: triangles 0-3, then 4-7 (an
         // empty block, never read, for leaves of four or fewer).
-        let blocks = bvh
-            .leaves
-            .par_iter()
-            .flat_map_iter(|l| {
+        // (An indexed collect: one allocation, filled by the workers.)
+        let blocks: Vec<Tri4> = (0..bvh.leaves.len() * 2)
+            .into_par_iter()
+            .map(|k| {
+                let l = bvh.leaves[k / 2];
                 let (first, count) = (l.first as usize, l.count as usize);
-                let lo = Tri4::new(&corners[first..first + count.min(4)], l.first);
-                let hi = if count > 4 {
+                if k % 2 == 1 && count > 4 {
                     Tri4::new(&corners[first + 4..first + count], l.first + 4)
                 } else {
-                    Tri4 { count: 0, ..lo }
-                };
-                [lo, hi]
+                    let lo = Tri4::new(&corners[first..first + count.min(4)], l.first);
+                    if k % 2 == 0 {
+                        lo
+                    } else {
+                        Tri4 { count: 0, ..lo }
+                    }
+                }
             })
             .collect();
+        phases.lap("triangles, corners, blocks");
         let structure = match accel {
             Accel::Bvh => Structure::Bvh,
             Accel::Grid => Structure::Grid(Grid::build(
@@ -277,6 +284,7 @@ impl Mesh {
             Accel::Brute => Structure::Brute,
         };
         let build_seconds = start.elapsed().as_secs_f64();
+        phases.lap("structure");
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
         for t in &triangles {
@@ -299,6 +307,7 @@ impl Mesh {
             structure,
             build_seconds,
         })
+        .inspect(|_| phases.lap("bounds"))
     }
 
     /// Number of triangles.
