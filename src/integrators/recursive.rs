@@ -5,13 +5,14 @@
 use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
+use crate::accel::packet::{LANES, LaneMask, for_each_lane};
 use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
 use crate::integrators::counters::RenderCounters;
-use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
+use crate::scene::{Hit, RenderScene};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
@@ -33,27 +34,13 @@ pub fn trace(
     counters: &mut RenderCounters,
 ) -> Color {
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
-        let l = scene.escaped_radiance(ray.direction);
-        return match scene.fog() {
-            Some(fog) => l * fog.transmittance(f32::INFINITY),
-            None => l,
-        };
+        return escaped(scene, ray);
     };
     let it = Interaction::with_cone(scene, ray, &hit, cone);
-    // A segment that ran through an absorbing interior (or, in a scene
-    // with media, through any medium: Beer-Lambert by its extinction)
-    // carries its transmittance to everything seen at its end.
-    let distance = hit.t * ray.direction.length();
-    let interior = if scene.has_media() {
-        volume::whitted_transmittance(scene, Some(&hit), ray.direction, distance)
-    } else {
-        interior_transmittance(&it, distance)
-    };
+    let interior = segment_transmittance(scene, ray, &hit, &it);
     let throughput = interior.map_or(throughput, |tr| throughput * tr);
     let mut radiance = it.surface.emission;
-    if it.is_lit_by_lights() && settings.style == Style::Gooch {
-        radiance += gooch_shade(&settings.gooch, scene.lights(), &it);
-    } else if it.is_lit_by_lights() {
+    if unshadowed_light(scene, settings, &it, &mut radiance) {
         for light in scene.lights() {
             if let Some(q) = direct_light(&it, light) {
                 counters.rays.shadow += 1;
@@ -63,21 +50,214 @@ pub fn trace(
             }
         }
     }
-    if depth < settings.max_depth {
-        for s in scatter(&it).into_iter().flatten() {
-            let t = throughput * s.weight;
-            if max_component(t) < settings.min_contribution {
-                continue;
-            }
-            match s.kind {
-                RayKind::Reflection => counters.rays.reflection += 1,
-                RayKind::Refraction => counters.rays.refraction += 1,
-                RayKind::Camera => counters.rays.camera += 1,
-            }
-            radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
+    add_specular(
+        scene,
+        settings,
+        &it,
+        throughput,
+        depth,
+        &mut radiance,
+        counters,
+    );
+    interior.map_or(radiance, |tr| radiance * tr)
+}
+
+// The steps of Whitted shading at a hit, shared by `trace` (one ray) and
+// `trace_camera_packet` (camera rays whose shadow rays are traced as
+// packets): each adds the same terms in the same order either way, so the
+// two give the same bits. They take the interaction by reference (moving
+// it costs a `memcpy` call).
+
+/// Radiance of a ray that found nothing.
+#[inline(always)]
+fn escaped(scene: &RenderScene, ray: &Ray) -> Color {
+    let l = scene.escaped_radiance(ray.direction);
+    match scene.fog() {
+        Some(fog) => l * fog.transmittance(f32::INFINITY),
+        None => l,
+    }
+}
+
+/// Transmittance of the segment of `ray` that reached `hit`: through an
+/// absorbing interior (or, in a scene with media, through any medium:
+/// Beer-Lambert by its extinction), carried to everything seen at its
+/// end.
+#[inline(always)]
+fn segment_transmittance(
+    scene: &RenderScene,
+    ray: &Ray,
+    hit: &Hit,
+    it: &Interaction,
+) -> Option<Color> {
+    let distance = hit.t * ray.direction.length();
+    if scene.has_media() {
+        volume::whitted_transmittance(scene, Some(hit), ray.direction, distance)
+    } else {
+        interior_transmittance(it, distance)
+    }
+}
+
+/// Adds the light that needs no shadow ray (the Gooch tone) to
+/// `radiance`; returns whether the point takes the lights' shadow rays.
+#[inline(always)]
+fn unshadowed_light(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    radiance: &mut Color,
+) -> bool {
+    if !it.is_lit_by_lights() {
+        return false;
+    }
+    if settings.style == Style::Gooch {
+        *radiance += gooch_shade(&settings.gooch, scene.lights(), it);
+        return false;
+    }
+    true
+}
+
+/// Adds the specular rays leaving `it` (traced recursively while `depth`
+/// allows) to `radiance`.
+#[inline(always)]
+fn add_specular(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    throughput: Color,
+    depth: u32,
+    radiance: &mut Color,
+    counters: &mut RenderCounters,
+) {
+    if depth >= settings.max_depth {
+        return;
+    }
+    for s in scatter(it).into_iter().flatten() {
+        let t = throughput * s.weight;
+        if max_component(t) < settings.min_contribution {
+            continue;
+        }
+        match s.kind {
+            RayKind::Reflection => counters.rays.reflection += 1,
+            RayKind::Refraction => counters.rays.refraction += 1,
+            RayKind::Camera => counters.rays.camera += 1,
+        }
+        *radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
+    }
+}
+
+/// Whether all `rays` point into one octant: the packets worth tracing
+/// together (the others are traced one ray at a time, which costs them
+/// less).
+#[inline(always)]
+fn one_octant(rays: &[Ray]) -> bool {
+    let octant = |r: &Ray| {
+        let d = r.direction;
+        (d.x.is_sign_negative() as u8)
+            | (d.y.is_sign_negative() as u8) << 1
+            | (d.z.is_sign_negative() as u8) << 2
+    };
+    let first = octant(&rays[0]);
+    rays.iter().all(|r| octant(r) == first)
+}
+
+/// [`trace`] of up to [`LANES`] camera rays (cone `cone`, depth 0) into
+/// `out`: the same radiance on each, bit for bit. The camera rays go
+/// through the scene as one packet, and so do the shadow rays of their
+/// hits towards each light in turn (neighbouring pixels' shadow rays to
+/// one light share most of the nodes they visit); packets whose rays
+/// point into different octants are traced ray by ray, and specular rays
+/// one at a time.
+///
+/// On the frame-loop benchmark's scene (`benches/frame_loop.rs`) this
+/// takes 2.5% fewer instructions per frame than pixel by pixel
+/// (callgrind), half from each kind of packet: most of a ray's work there
+/// is per ray (the unbounded ground plane, the instance transforms, the
+/// shapes and leaves tested lane by lane), not node tests.
+fn trace_camera_packet(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    rays: &[Ray],
+    cone: RayCone,
+    counters: &mut RenderCounters,
+    out: &mut [Color],
+) {
+    let n = rays.len();
+    let mut its: [Option<Interaction>; LANES] = [None; LANES];
+    let mut interior: [Option<Color>; LANES] = [None; LANES];
+    let mut throughput = [Color::ONE; LANES];
+    let mut shadowed: LaneMask = 0;
+    let mut hits = [None; LANES];
+    if one_octant(rays) {
+        scene.intersect_packet(rays, &mut hits[..n]);
+    } else {
+        for (h, r) in hits.iter_mut().zip(rays) {
+            *h = scene.intersect(r, 0.0, f32::INFINITY);
         }
     }
-    interior.map_or(radiance, |tr| radiance * tr)
+    for l in 0..n {
+        let ray = &rays[l];
+        let Some(hit) = &hits[l] else {
+            out[l] = escaped(scene, ray);
+            continue;
+        };
+        let it = its[l].insert(Interaction::with_cone(scene, ray, hit, cone));
+        interior[l] = segment_transmittance(scene, ray, hit, it);
+        if let Some(tr) = interior[l] {
+            throughput[l] *= tr;
+        }
+        out[l] = it.surface.emission;
+        if unshadowed_light(scene, settings, it, &mut out[l]) {
+            shadowed |= 1 << l;
+        }
+    }
+    if shadowed != 0 {
+        for light in scene.lights() {
+            // The lanes with a shadow ray towards this light, packed.
+            let mut lane = [0usize; LANES];
+            let mut shadow_rays = [Ray::new(glam::Vec3A::ZERO, glam::Vec3A::X); LANES];
+            let mut t_max = [0.0f32; LANES];
+            let mut radiance = [Color::ZERO; LANES];
+            let mut k = 0;
+            for_each_lane(shadowed, |l| {
+                let it = its[l].as_ref().expect("shadowed lanes have a hit");
+                if let Some(q) = direct_light(it, light) {
+                    counters.rays.shadow += 1;
+                    shadow_rays[k] = q.ray;
+                    t_max[k] = q.t_max;
+                    radiance[k] = q.radiance;
+                    lane[k] = l;
+                    k += 1;
+                }
+            });
+            if k == 0 {
+                continue;
+            }
+            let blocked: LaneMask = if k > 1 && one_octant(&shadow_rays[..k]) {
+                scene.occluded_packet(&shadow_rays[..k], &t_max[..k])
+            } else {
+                let mut b = 0;
+                for j in 0..k {
+                    if scene.occluded(&shadow_rays[j], 0.0, t_max[j]) {
+                        b |= 1 << j;
+                    }
+                }
+                b
+            };
+            for j in 0..k {
+                if blocked & (1 << j) == 0 {
+                    out[lane[j]] += radiance[j];
+                }
+            }
+        }
+    }
+    for l in 0..n {
+        if let Some(it) = &its[l] {
+            add_specular(scene, settings, it, throughput[l], 0, &mut out[l], counters);
+            if let Some(tr) = interior[l] {
+                out[l] *= tr;
+            }
+        }
+    }
 }
 
 /// Radiance along a camera ray by path tracing: a loop, one vertex per
@@ -275,6 +455,52 @@ fn pixel_sum(
     sum
 }
 
+/// The exact sums of the window's samples of the `n` (at most [`LANES`])
+/// pixels from `(x, y)` along a row, under Whitted transport: each sample
+/// index is traced for all of them as one packet
+/// ([`trace_camera_packet`]). The same sums as [`pixel_sum`] per pixel.
+#[inline(always)]
+fn camera_packet_sums(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    (x, y): (u32, u32),
+    n: usize,
+    samples: std::ops::Range<u32>,
+    counters: &mut RenderCounters,
+) -> [PixelSum; LANES] {
+    let mut sums: [PixelSum; LANES] = Default::default();
+    let spp = settings.spp;
+    // Without jitter or lens the camera ray uses no random numbers.
+    let fixed = spp == 1 && !cam.has_lens();
+    for s in samples {
+        let rays: [Ray; LANES] = std::array::from_fn(|l| {
+            let x = x + l.min(n - 1) as u32;
+            if fixed {
+                cam.ray(glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+            } else {
+                let pixel = y * settings.width + x;
+                let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
+                camera_ray(cam, x, y, spp, &mut sampler)
+            }
+        });
+        counters.rays.camera += n as u64;
+        let mut radiance = [Color::ZERO; LANES];
+        trace_camera_packet(
+            scene,
+            settings,
+            &rays[..n],
+            cam.cone(),
+            counters,
+            &mut radiance[..n],
+        );
+        for (sum, l) in sums.iter_mut().zip(&radiance[..n]) {
+            accumulate(sum, *l, counters);
+        }
+    }
+    sums
+}
+
 /// Renders the settings' window with the recursive tracer, rows in
 /// parallel, into one value per window pixel (row-major over the window's
 /// columns and rows) made by `f` from the pixel's exact sum.
@@ -290,10 +516,37 @@ fn render_rows<T: Send>(
     let map = settings.path_map();
     let window = settings.window();
     let x0 = map.first_column();
+    // Whitted transport traces runs of eight pixels of a row as packets
+    // (`trace_camera_packet`); the pixels' sums are the same bits.
+    let packets = matches!(
+        settings.transport,
+        Transport::Whitted | Transport::Radiosity
+    );
     out.par_chunks_mut(map.columns() as usize)
         .zip(map.rows().par_iter())
         .map(|(row, &y)| {
             let mut counters = RenderCounters::default();
+            if packets {
+                for (c, run) in row.chunks_mut(LANES).enumerate() {
+                    let x = x0 + (c * LANES) as u32;
+                    let sums = camera_packet_sums(
+                        scene,
+                        settings,
+                        &cam,
+                        (x, y),
+                        run.len(),
+                        window.samples.clone(),
+                        &mut counters,
+                    );
+                    for (px, sum) in run.iter_mut().zip(sums) {
+                        *px = f(sum);
+                    }
+                }
+                if let Some(p) = progress {
+                    p(1);
+                }
+                return counters;
+            }
             for (i, px) in row.iter_mut().enumerate() {
                 let x = x0 + i as u32;
                 let sum = pixel_sum(
