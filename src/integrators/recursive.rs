@@ -1,6 +1,7 @@
-//! The recursive tracer: depth-first, one ray at a time. Whitted
-//! transport recurses into each specular ray; path transport follows one
-//! ray per bounce in a loop.
+//! The recursive tracer: depth-first. Whitted transport traces the camera
+//! rays of eight neighbouring pixels and their shadow rays as packets
+//! (`trace_camera_packet`) and recurses into each specular ray one at a
+//! time; path transport follows one ray per bounce in a loop.
 
 use rayon::prelude::*;
 
