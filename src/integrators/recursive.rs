@@ -607,3 +607,159 @@ pub fn render_sums(
     let counters = render_rows(scene, camera, settings, progress, sums.pixels_mut(), |s| s);
     (sums, counters)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::{DVec3, Vec3};
+
+    use super::*;
+    use crate::accel::build::BuildQuality;
+    use crate::geometry::mesh::{Mesh, NormalMode};
+    use crate::geometry::shapes::Shape;
+    use crate::geometry::transform::Transform;
+    use crate::scene::instance::{Instance, InstanceGeometry};
+    use crate::scene::light::Light;
+    use crate::scene::material::Material;
+
+    /// A ground plane, a torus-knot mesh, a mirror ball, a glass ball, a
+    /// mirror disk and three point lights (three terms, so that the order
+    /// in which they are added shows in the bits): every kind of ray of
+    /// Whitted transport, and shadow rays blocked by shapes and by
+    /// triangles.
+    fn scene() -> RenderScene {
+        let knot = crate::geometry::procedural::torus_knot(2, 3, 1.0, 0.3, 64, 8);
+        let knot =
+            Arc::new(Mesh::new("knot", knot, NormalMode::Smooth, BuildQuality::Medium).unwrap());
+        let at = |x: f64, y: f64, z: f64| Transform::from_translation(DVec3::new(x, y, z));
+        let instances = vec![
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Plane),
+                &Transform::default(),
+                0,
+            ),
+            Instance::new(InstanceGeometry::Mesh(knot), &at(0.0, 1.2, 0.0), 1),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 0.6 }),
+                &at(-2.0, 0.6, 0.5),
+                2,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 0.5 }),
+                &at(1.8, 0.5, 1.0),
+                3,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Disk { radius: 3.0 }),
+                &Transform::from(
+                    glam::Affine3A::from_translation(Vec3::new(0.0, 2.0, -3.0))
+                        * glam::Affine3A::from_rotation_x(std::f32::consts::FRAC_PI_2),
+                ),
+                2,
+            ),
+        ];
+        let materials = vec![
+            Material {
+                base_color: Vec3::splat(0.6),
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::new(0.8, 0.3, 0.2),
+                specular: Vec3::splat(0.3),
+                shininess: 40.0,
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::splat(0.05),
+                diffuse: 0.1,
+                mirror: Vec3::splat(0.85),
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::ONE,
+                diffuse: 0.0,
+                transmission: 1.0,
+                ior: 1.5,
+                ..Default::default()
+            },
+        ];
+        let lights = vec![
+            (
+                Light::Point {
+                    intensity: Vec3::splat(60.0),
+                },
+                at(-3.0, 5.0, 4.0),
+            ),
+            (
+                Light::Point {
+                    intensity: Vec3::new(30.0, 25.0, 20.0),
+                },
+                at(2.0, 4.0, -1.0),
+            ),
+            (
+                Light::Point {
+                    intensity: Vec3::new(7.0, 9.0, 11.0),
+                },
+                at(0.5, 6.0, 3.0),
+            ),
+        ];
+        RenderScene::new(
+            instances,
+            materials,
+            lights,
+            Vec3::splat(0.1),
+            BuildQuality::Medium,
+        )
+    }
+
+    /// Under Whitted transport `render` traces runs of eight pixels as
+    /// packets (camera rays, then each light's shadow rays); every pixel
+    /// must be the bits that tracing it alone gives (`pixel_sum`, which
+    /// calls `trace` ray by ray), and the ray counts the same: at one and
+    /// at three samples per pixel, through a lens, with a width that is
+    /// not a multiple of eight and a view whose middle packets point into
+    /// two octants.
+    #[test]
+    fn camera_packets_give_the_bits_of_pixel_by_pixel_tracing() {
+        let scene = scene();
+        for (spp, lens_radius) in [(1, 0.0), (3, 0.0), (1, 0.05)] {
+            let camera = Camera {
+                look_from: DVec3::new(0.0, 3.0, 8.0),
+                look_at: DVec3::new(0.0, 1.0, 0.0),
+                vfov_degrees: 50.0,
+                lens_radius,
+                ..Default::default()
+            };
+            let settings = RenderSettings {
+                width: 45,
+                height: 30,
+                spp,
+                max_depth: 3,
+                transport: Transport::Whitted,
+                ..Default::default()
+            };
+            let (film, counters) = render(&scene, &camera, &settings, None);
+            let cam = camera_rays(&scene, &camera, &settings);
+            let mut alone = RenderCounters::default();
+            for y in 0..settings.height {
+                for x in 0..settings.width {
+                    let sum = pixel_sum(&scene, &settings, &cam, (x, y), 0..spp, &mut alone);
+                    let (p, q) = (film.pixels[(y * settings.width + x) as usize], sum.mean());
+                    assert_eq!(
+                        p.to_array().map(f32::to_bits),
+                        q.to_array().map(f32::to_bits),
+                        "spp {spp}, lens {lens_radius}: pixel ({x}, {y}): {p} vs {q}"
+                    );
+                }
+            }
+            assert_eq!(counters, alone, "spp {spp}, lens {lens_radius}");
+            assert!(
+                counters.rays.shadow > 0
+                    && counters.rays.reflection > 0
+                    && counters.rays.refraction > 0,
+                "{counters:?}"
+            );
+        }
+    }
+}
