@@ -13,6 +13,8 @@
 //! tested per lane by the caller with the same kernels as single rays, so
 //! the hits are the same.
 
+use std::mem::MaybeUninit;
+
 use glam::{Vec3A, Vec4};
 
 use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
@@ -145,17 +147,24 @@ pub fn traverse<const AVX: bool>(
     }
     // A fixed part (nothing allocated per packet) and a spill for deeper
     // stacks: the spill only holds entries while the fixed part is full.
-    let mut fixed = [(0u32, 0 as LaneMask, 0.0f32); FIXED];
+    // The fixed part is left uninitialised (as the single-ray stack's):
+    // only entries below `top` are read, and each was written.
+    let mut fixed = [const { MaybeUninit::<Pending>::uninit() }; FIXED];
     let mut top = 0;
     let mut spill: Vec<Pending> = Vec::new();
-    fixed[0] = (0, alive, f32::NEG_INFINITY);
+    fixed[0].write((0, alive, f32::NEG_INFINITY));
     top += 1;
     loop {
         let (cur, lanes_in, near) = if let Some(e) = spill.pop() {
             e
         } else if top > 0 {
             top -= 1;
-            fixed[top]
+            // SAFETY: entries below `top` were written (`top` only grows
+            // after a write).
+            #[allow(unsafe_code)]
+            unsafe {
+                fixed[top].assume_init()
+            }
         } else {
             break;
         };
@@ -214,7 +223,7 @@ pub fn traverse<const AVX: bool>(
         for &e in &found[..n] {
             prefetch_child(bvh, e.0);
             if top < FIXED {
-                fixed[top] = e;
+                fixed[top].write(e);
                 top += 1;
             } else {
                 spill.push(e);

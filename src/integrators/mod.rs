@@ -77,7 +77,8 @@ pub fn camera_rays(scene: &RenderScene, camera: &Camera, settings: &RenderSettin
 /// Which integrator renders the image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
 pub enum IntegratorKind {
-    /// Depth-first recursive Whitted tracing, one ray at a time.
+    /// Depth-first recursive tracing, pixel by pixel (under Whitted
+    /// transport, camera and shadow rays in packets of eight pixels).
     #[default]
     Recursive,
     /// Breadth-first wavefront tracing over structure-of-arrays queues,

@@ -1,17 +1,19 @@
-//! The recursive tracer: depth-first, one ray at a time. Whitted
-//! transport recurses into each specular ray; path transport follows one
-//! ray per bounce in a loop.
+//! The recursive tracer: depth-first. Whitted transport traces the camera
+//! rays of eight neighbouring pixels and their shadow rays as packets
+//! (`trace_camera_packet`) and recurses into each specular ray one at a
+//! time; path transport follows one ray per bounce in a loop.
 
 use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
+use crate::accel::packet::{LANES, LaneMask, for_each_lane};
 use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
 use crate::integrators::counters::RenderCounters;
-use crate::scene::RenderScene;
 use crate::scene::camera::{Camera, CameraRays};
+use crate::scene::{Hit, RenderScene};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
@@ -33,27 +35,13 @@ pub fn trace(
     counters: &mut RenderCounters,
 ) -> Color {
     let Some(hit) = scene.intersect(ray, 0.0, f32::INFINITY) else {
-        let l = scene.escaped_radiance(ray.direction);
-        return match scene.fog() {
-            Some(fog) => l * fog.transmittance(f32::INFINITY),
-            None => l,
-        };
+        return escaped(scene, ray);
     };
     let it = Interaction::with_cone(scene, ray, &hit, cone);
-    // A segment that ran through an absorbing interior (or, in a scene
-    // with media, through any medium: Beer-Lambert by its extinction)
-    // carries its transmittance to everything seen at its end.
-    let distance = hit.t * ray.direction.length();
-    let interior = if scene.has_media() {
-        volume::whitted_transmittance(scene, Some(&hit), ray.direction, distance)
-    } else {
-        interior_transmittance(&it, distance)
-    };
+    let interior = segment_transmittance(scene, ray, &hit, &it);
     let throughput = interior.map_or(throughput, |tr| throughput * tr);
     let mut radiance = it.surface.emission;
-    if it.is_lit_by_lights() && settings.style == Style::Gooch {
-        radiance += gooch_shade(&settings.gooch, scene.lights(), &it);
-    } else if it.is_lit_by_lights() {
+    if unshadowed_light(scene, settings, &it, &mut radiance) {
         for light in scene.lights() {
             if let Some(q) = direct_light(&it, light) {
                 counters.rays.shadow += 1;
@@ -63,21 +51,214 @@ pub fn trace(
             }
         }
     }
-    if depth < settings.max_depth {
-        for s in scatter(&it).into_iter().flatten() {
-            let t = throughput * s.weight;
-            if max_component(t) < settings.min_contribution {
-                continue;
-            }
-            match s.kind {
-                RayKind::Reflection => counters.rays.reflection += 1,
-                RayKind::Refraction => counters.rays.refraction += 1,
-                RayKind::Camera => counters.rays.camera += 1,
-            }
-            radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
+    add_specular(
+        scene,
+        settings,
+        &it,
+        throughput,
+        depth,
+        &mut radiance,
+        counters,
+    );
+    interior.map_or(radiance, |tr| radiance * tr)
+}
+
+// The steps of Whitted shading at a hit, shared by `trace` (one ray) and
+// `trace_camera_packet` (camera rays whose shadow rays are traced as
+// packets): each adds the same terms in the same order either way, so the
+// two give the same bits. They take the interaction by reference (moving
+// it costs a `memcpy` call).
+
+/// Radiance of a ray that found nothing.
+#[inline(always)]
+fn escaped(scene: &RenderScene, ray: &Ray) -> Color {
+    let l = scene.escaped_radiance(ray.direction);
+    match scene.fog() {
+        Some(fog) => l * fog.transmittance(f32::INFINITY),
+        None => l,
+    }
+}
+
+/// Transmittance of the segment of `ray` that reached `hit`: through an
+/// absorbing interior (or, in a scene with media, through any medium:
+/// Beer-Lambert by its extinction), carried to everything seen at its
+/// end.
+#[inline(always)]
+fn segment_transmittance(
+    scene: &RenderScene,
+    ray: &Ray,
+    hit: &Hit,
+    it: &Interaction,
+) -> Option<Color> {
+    let distance = hit.t * ray.direction.length();
+    if scene.has_media() {
+        volume::whitted_transmittance(scene, Some(hit), ray.direction, distance)
+    } else {
+        interior_transmittance(it, distance)
+    }
+}
+
+/// Adds the light that needs no shadow ray (the Gooch tone) to
+/// `radiance`; returns whether the point takes the lights' shadow rays.
+#[inline(always)]
+fn unshadowed_light(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    radiance: &mut Color,
+) -> bool {
+    if !it.is_lit_by_lights() {
+        return false;
+    }
+    if settings.style == Style::Gooch {
+        *radiance += gooch_shade(&settings.gooch, scene.lights(), it);
+        return false;
+    }
+    true
+}
+
+/// Adds the specular rays leaving `it` (traced recursively while `depth`
+/// allows) to `radiance`.
+#[inline(always)]
+fn add_specular(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    throughput: Color,
+    depth: u32,
+    radiance: &mut Color,
+    counters: &mut RenderCounters,
+) {
+    if depth >= settings.max_depth {
+        return;
+    }
+    for s in scatter(it).into_iter().flatten() {
+        let t = throughput * s.weight;
+        if max_component(t) < settings.min_contribution {
+            continue;
+        }
+        match s.kind {
+            RayKind::Reflection => counters.rays.reflection += 1,
+            RayKind::Refraction => counters.rays.refraction += 1,
+            RayKind::Camera => counters.rays.camera += 1,
+        }
+        *radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
+    }
+}
+
+/// Whether all `rays` point into one octant: the packets worth tracing
+/// together (the others are traced one ray at a time, which costs them
+/// less).
+#[inline(always)]
+fn one_octant(rays: &[Ray]) -> bool {
+    let octant = |r: &Ray| {
+        let d = r.direction;
+        (d.x.is_sign_negative() as u8)
+            | (d.y.is_sign_negative() as u8) << 1
+            | (d.z.is_sign_negative() as u8) << 2
+    };
+    let first = octant(&rays[0]);
+    rays.iter().all(|r| octant(r) == first)
+}
+
+/// [`trace`] of up to [`LANES`] camera rays (cone `cone`, depth 0) into
+/// `out`: the same radiance on each, bit for bit. The camera rays go
+/// through the scene as one packet, and so do the shadow rays of their
+/// hits towards each light in turn (neighbouring pixels' shadow rays to
+/// one light share most of the nodes they visit); packets whose rays
+/// point into different octants are traced ray by ray, and specular rays
+/// one at a time.
+///
+/// On the frame-loop benchmark's scene (`benches/frame_loop.rs`) this
+/// takes 2.5% fewer instructions per frame than pixel by pixel
+/// (callgrind), half from each kind of packet: most of a ray's work there
+/// is per ray (the unbounded ground plane, the instance transforms, the
+/// shapes and leaves tested lane by lane), not node tests.
+fn trace_camera_packet(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    rays: &[Ray],
+    cone: RayCone,
+    counters: &mut RenderCounters,
+    out: &mut [Color],
+) {
+    let n = rays.len();
+    let mut its: [Option<Interaction>; LANES] = [None; LANES];
+    let mut interior: [Option<Color>; LANES] = [None; LANES];
+    let mut throughput = [Color::ONE; LANES];
+    let mut shadowed: LaneMask = 0;
+    let mut hits = [None; LANES];
+    if one_octant(rays) {
+        scene.intersect_packet(rays, &mut hits[..n]);
+    } else {
+        for (h, r) in hits.iter_mut().zip(rays) {
+            *h = scene.intersect(r, 0.0, f32::INFINITY);
         }
     }
-    interior.map_or(radiance, |tr| radiance * tr)
+    for l in 0..n {
+        let ray = &rays[l];
+        let Some(hit) = &hits[l] else {
+            out[l] = escaped(scene, ray);
+            continue;
+        };
+        let it = its[l].insert(Interaction::with_cone(scene, ray, hit, cone));
+        interior[l] = segment_transmittance(scene, ray, hit, it);
+        if let Some(tr) = interior[l] {
+            throughput[l] *= tr;
+        }
+        out[l] = it.surface.emission;
+        if unshadowed_light(scene, settings, it, &mut out[l]) {
+            shadowed |= 1 << l;
+        }
+    }
+    if shadowed != 0 {
+        for light in scene.lights() {
+            // The lanes with a shadow ray towards this light, packed.
+            let mut lane = [0usize; LANES];
+            let mut shadow_rays = [Ray::new(glam::Vec3A::ZERO, glam::Vec3A::X); LANES];
+            let mut t_max = [0.0f32; LANES];
+            let mut radiance = [Color::ZERO; LANES];
+            let mut k = 0;
+            for_each_lane(shadowed, |l| {
+                let it = its[l].as_ref().expect("shadowed lanes have a hit");
+                if let Some(q) = direct_light(it, light) {
+                    counters.rays.shadow += 1;
+                    shadow_rays[k] = q.ray;
+                    t_max[k] = q.t_max;
+                    radiance[k] = q.radiance;
+                    lane[k] = l;
+                    k += 1;
+                }
+            });
+            if k == 0 {
+                continue;
+            }
+            let blocked: LaneMask = if k > 1 && one_octant(&shadow_rays[..k]) {
+                scene.occluded_packet(&shadow_rays[..k], &t_max[..k])
+            } else {
+                let mut b = 0;
+                for j in 0..k {
+                    if scene.occluded(&shadow_rays[j], 0.0, t_max[j]) {
+                        b |= 1 << j;
+                    }
+                }
+                b
+            };
+            for j in 0..k {
+                if blocked & (1 << j) == 0 {
+                    out[lane[j]] += radiance[j];
+                }
+            }
+        }
+    }
+    for l in 0..n {
+        if let Some(it) = &its[l] {
+            add_specular(scene, settings, it, throughput[l], 0, &mut out[l], counters);
+            if let Some(tr) = interior[l] {
+                out[l] *= tr;
+            }
+        }
+    }
 }
 
 /// Radiance along a camera ray by path tracing: a loop, one vertex per
@@ -275,6 +456,52 @@ fn pixel_sum(
     sum
 }
 
+/// The exact sums of the window's samples of the `n` (at most [`LANES`])
+/// pixels from `(x, y)` along a row, under Whitted transport: each sample
+/// index is traced for all of them as one packet
+/// ([`trace_camera_packet`]). The same sums as [`pixel_sum`] per pixel.
+#[inline(always)]
+fn camera_packet_sums(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    (x, y): (u32, u32),
+    n: usize,
+    samples: std::ops::Range<u32>,
+    counters: &mut RenderCounters,
+) -> [PixelSum; LANES] {
+    let mut sums: [PixelSum; LANES] = Default::default();
+    let spp = settings.spp;
+    // Without jitter or lens the camera ray uses no random numbers.
+    let fixed = spp == 1 && !cam.has_lens();
+    for s in samples {
+        let rays: [Ray; LANES] = std::array::from_fn(|l| {
+            let x = x + l.min(n - 1) as u32;
+            if fixed {
+                cam.ray(glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+            } else {
+                let pixel = y * settings.width + x;
+                let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
+                camera_ray(cam, x, y, spp, &mut sampler)
+            }
+        });
+        counters.rays.camera += n as u64;
+        let mut radiance = [Color::ZERO; LANES];
+        trace_camera_packet(
+            scene,
+            settings,
+            &rays[..n],
+            cam.cone(),
+            counters,
+            &mut radiance[..n],
+        );
+        for (sum, l) in sums.iter_mut().zip(&radiance[..n]) {
+            accumulate(sum, *l, counters);
+        }
+    }
+    sums
+}
+
 /// Renders the settings' window with the recursive tracer, rows in
 /// parallel, into one value per window pixel (row-major over the window's
 /// columns and rows) made by `f` from the pixel's exact sum.
@@ -290,10 +517,37 @@ fn render_rows<T: Send>(
     let map = settings.path_map();
     let window = settings.window();
     let x0 = map.first_column();
+    // Whitted transport traces runs of eight pixels of a row as packets
+    // (`trace_camera_packet`); the pixels' sums are the same bits.
+    let packets = matches!(
+        settings.transport,
+        Transport::Whitted | Transport::Radiosity
+    );
     out.par_chunks_mut(map.columns() as usize)
         .zip(map.rows().par_iter())
         .map(|(row, &y)| {
             let mut counters = RenderCounters::default();
+            if packets {
+                for (c, run) in row.chunks_mut(LANES).enumerate() {
+                    let x = x0 + (c * LANES) as u32;
+                    let sums = camera_packet_sums(
+                        scene,
+                        settings,
+                        &cam,
+                        (x, y),
+                        run.len(),
+                        window.samples.clone(),
+                        &mut counters,
+                    );
+                    for (px, sum) in run.iter_mut().zip(sums) {
+                        *px = f(sum);
+                    }
+                }
+                if let Some(p) = progress {
+                    p(1);
+                }
+                return counters;
+            }
             for (i, px) in row.iter_mut().enumerate() {
                 let x = x0 + i as u32;
                 let sum = pixel_sum(
@@ -352,4 +606,160 @@ pub fn render_sums(
     );
     let counters = render_rows(scene, camera, settings, progress, sums.pixels_mut(), |s| s);
     (sums, counters)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::{DVec3, Vec3};
+
+    use super::*;
+    use crate::accel::build::BuildQuality;
+    use crate::geometry::mesh::{Mesh, NormalMode};
+    use crate::geometry::shapes::Shape;
+    use crate::geometry::transform::Transform;
+    use crate::scene::instance::{Instance, InstanceGeometry};
+    use crate::scene::light::Light;
+    use crate::scene::material::Material;
+
+    /// A ground plane, a torus-knot mesh, a mirror ball, a glass ball, a
+    /// mirror disk and three point lights (three terms, so that the order
+    /// in which they are added shows in the bits): every kind of ray of
+    /// Whitted transport, and shadow rays blocked by shapes and by
+    /// triangles.
+    fn scene() -> RenderScene {
+        let knot = crate::geometry::procedural::torus_knot(2, 3, 1.0, 0.3, 64, 8);
+        let knot =
+            Arc::new(Mesh::new("knot", knot, NormalMode::Smooth, BuildQuality::Medium).unwrap());
+        let at = |x: f64, y: f64, z: f64| Transform::from_translation(DVec3::new(x, y, z));
+        let instances = vec![
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Plane),
+                &Transform::default(),
+                0,
+            ),
+            Instance::new(InstanceGeometry::Mesh(knot), &at(0.0, 1.2, 0.0), 1),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 0.6 }),
+                &at(-2.0, 0.6, 0.5),
+                2,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Sphere { radius: 0.5 }),
+                &at(1.8, 0.5, 1.0),
+                3,
+            ),
+            Instance::new(
+                InstanceGeometry::Shape(Shape::Disk { radius: 3.0 }),
+                &Transform::from(
+                    glam::Affine3A::from_translation(Vec3::new(0.0, 2.0, -3.0))
+                        * glam::Affine3A::from_rotation_x(std::f32::consts::FRAC_PI_2),
+                ),
+                2,
+            ),
+        ];
+        let materials = vec![
+            Material {
+                base_color: Vec3::splat(0.6),
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::new(0.8, 0.3, 0.2),
+                specular: Vec3::splat(0.3),
+                shininess: 40.0,
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::splat(0.05),
+                diffuse: 0.1,
+                mirror: Vec3::splat(0.85),
+                ..Default::default()
+            },
+            Material {
+                base_color: Vec3::ONE,
+                diffuse: 0.0,
+                transmission: 1.0,
+                ior: 1.5,
+                ..Default::default()
+            },
+        ];
+        let lights = vec![
+            (
+                Light::Point {
+                    intensity: Vec3::splat(60.0),
+                },
+                at(-3.0, 5.0, 4.0),
+            ),
+            (
+                Light::Point {
+                    intensity: Vec3::new(30.0, 25.0, 20.0),
+                },
+                at(2.0, 4.0, -1.0),
+            ),
+            (
+                Light::Point {
+                    intensity: Vec3::new(7.0, 9.0, 11.0),
+                },
+                at(0.5, 6.0, 3.0),
+            ),
+        ];
+        RenderScene::new(
+            instances,
+            materials,
+            lights,
+            Vec3::splat(0.1),
+            BuildQuality::Medium,
+        )
+    }
+
+    /// Under Whitted transport `render` traces runs of eight pixels as
+    /// packets (camera rays, then each light's shadow rays); every pixel
+    /// must be the bits that tracing it alone gives (`pixel_sum`, which
+    /// calls `trace` ray by ray), and the ray counts the same: at one and
+    /// at three samples per pixel, through a lens, with a width that is
+    /// not a multiple of eight and a view whose middle packets point into
+    /// two octants.
+    #[test]
+    fn camera_packets_give_the_bits_of_pixel_by_pixel_tracing() {
+        let scene = scene();
+        for (spp, lens_radius) in [(1, 0.0), (3, 0.0), (1, 0.05)] {
+            let camera = Camera {
+                look_from: DVec3::new(0.0, 3.0, 8.0),
+                look_at: DVec3::new(0.0, 1.0, 0.0),
+                vfov_degrees: 50.0,
+                lens_radius,
+                ..Default::default()
+            };
+            let settings = RenderSettings {
+                width: 45,
+                height: 30,
+                spp,
+                max_depth: 3,
+                transport: Transport::Whitted,
+                ..Default::default()
+            };
+            let (film, counters) = render(&scene, &camera, &settings, None);
+            let cam = camera_rays(&scene, &camera, &settings);
+            let mut alone = RenderCounters::default();
+            for y in 0..settings.height {
+                for x in 0..settings.width {
+                    let sum = pixel_sum(&scene, &settings, &cam, (x, y), 0..spp, &mut alone);
+                    let (p, q) = (film.pixels[(y * settings.width + x) as usize], sum.mean());
+                    assert_eq!(
+                        p.to_array().map(f32::to_bits),
+                        q.to_array().map(f32::to_bits),
+                        "spp {spp}, lens {lens_radius}: pixel ({x}, {y}): {p} vs {q}"
+                    );
+                }
+            }
+            assert_eq!(counters, alone, "spp {spp}, lens {lens_radius}");
+            assert!(
+                counters.rays.shadow > 0
+                    && counters.rays.reflection > 0
+                    && counters.rays.refraction > 0,
+                "{counters:?}"
+            );
+        }
+    }
 }

@@ -168,7 +168,7 @@ impl RenderScene {
         }
         let local = to_object(inst, ray);
         match &inst.geometry {
-            InstanceGeometry::Shape(s) => s.intersect(&local, t_min, t_max).is_some(),
+            InstanceGeometry::Shape(s) => s.occludes(&local, t_min, t_max),
             InstanceGeometry::Mesh(m) => m.occluded_kernel::<AVX>(&local, t_min, t_max),
         }
     }
@@ -558,7 +558,7 @@ impl RenderScene {
                                 #[inline(always)]
                                 |l| {
                                     let local = to_object(inst, &p.rays[l]);
-                                    if s.intersect(&local, p.t_min[l], p.t_max[l]).is_some() {
+                                    if s.occludes(&local, p.t_min[l], p.t_max[l]) {
                                         now |= 1 << l;
                                     }
                                 },

@@ -96,6 +96,33 @@ pub(super) fn intersect_plane(ray: &Ray, t_min: f32, t_max: f32) -> Option<Shape
     })
 }
 
+/// `intersect_plane(..).is_some()` under [`Shape::intersect`]'s filter
+/// of non-finite hits (`t`, point `(x, 0, z)`, `uv = (x, z)`), without
+/// building the hit.
+#[inline(always)]
+pub(super) fn occludes_plane(ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    hit_y0(ray, t_min, t_max)
+        .is_some_and(|(t, p)| t.is_finite() && p.x.is_finite() && p.z.is_finite())
+}
+
+/// `intersect_disk(..).is_some()` under [`Shape::intersect`]'s filter of
+/// non-finite hits, without building the hit: the same expressions as
+/// `intersect_disk`, `uv` included (it overflows for a tiny radius).
+#[inline(always)]
+pub(super) fn occludes_disk(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> bool {
+    let Some((t, p)) = hit_y0(ray, t_min, t_max) else {
+        return false;
+    };
+    if p.x * p.x + p.z * p.z > r * r {
+        return false;
+    }
+    t.is_finite()
+        && p.x.is_finite()
+        && p.z.is_finite()
+        && (p.x / r * 0.5 + 0.5).is_finite()
+        && (p.z / r * 0.5 + 0.5).is_finite()
+}
+
 /// Disk of radius `r` in `y = 0` (boundary included); normal `+Y`.
 pub(super) fn intersect_disk(ray: &Ray, r: f32, t_min: f32, t_max: f32) -> Option<ShapeHit> {
     let (t, p) = hit_y0(ray, t_min, t_max)?;

@@ -1477,3 +1477,92 @@ fn non_finite_input_never_produces_nan() {
         }
     }
 }
+
+/// `occludes` (shadow rays) answers exactly as `intersect(..).is_some()`
+/// for every shape: on random rays at ordinary and extreme scales
+/// (origins and intervals up to 1e37), rays in the plane, parallel to it
+/// and starting on it, disks of zero, tiny and huge radius, and hits that
+/// `intersect` drops because the point overflows or the disk's `uv` is
+/// NaN (a zero-radius disk hit at its centre).
+#[test]
+fn occludes_answers_as_intersect_does() {
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let mut cases = Vec::new();
+    for i in 0..4000 {
+        let scale = [1.0f32, 1e-20, 1e20, 1e37][i % 4];
+        let mut o = v(next(), next(), next()) * 3.0 * scale;
+        let mut d = v(next(), next(), next());
+        match i % 11 {
+            0 => d.y = 0.0,
+            1 => o.y = 0.0,
+            2 => d.y = -0.0,
+            _ => {}
+        }
+        let interval = match i % 5 {
+            0 => (0.0, INF),
+            1 => (0.0, next().abs() * 10.0 * scale),
+            2 => (next().abs() * scale, f32::MAX),
+            3 => (-INF, INF),
+            _ => (0.0, 1e-3),
+        };
+        cases.push((ray(o, d), interval));
+    }
+    let edges = [
+        // Through the centre: a zero-radius disk's uv is 0 / 0.
+        ray(v(0.0, 1.0, 0.0), v(0.0, -1.0, 0.0)),
+        // The crossing point overflows.
+        ray(v(3e38, 1.0, 0.0), v(1e9, -1e-30, 0.0)),
+        ray(v(0.0, -1.0, -3e38), v(0.0, 1e-30, -1e9)),
+        // In the plane, and starting on it.
+        ray(v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0)),
+        ray(v(1.0, 0.0, 1.0), v(0.0, 1.0, 0.0)),
+    ];
+    for r in edges {
+        cases.push((r, (0.0, INF)));
+        cases.push((r, (-INF, INF)));
+    }
+    let mut shapes = vec![
+        Shape::Plane,
+        Shape::Disk { radius: 1.0 },
+        Shape::Disk { radius: 1e-30 },
+        Shape::Disk { radius: 1e30 },
+        Shape::Disk { radius: 0.0 },
+    ];
+    shapes.extend(quadrics());
+    let (mut hits, mut dropped, mut total) = (0, 0, 0);
+    for shape in &shapes {
+        for (r, (t_min, t_max)) in &cases {
+            let full = shape.intersect(r, *t_min, *t_max).is_some();
+            assert_eq!(
+                shape.occludes(r, *t_min, *t_max),
+                full,
+                "{shape:?} {r:?} ({t_min}, {t_max})"
+            );
+            hits += full as u32;
+            total += 1;
+            // Crossings of y = 0 inside the interval (and the disk) that
+            // `intersect` drops as non-finite.
+            if !full && matches!(shape, Shape::Plane | Shape::Disk { .. }) && r.direction.y != 0.0 {
+                let t = -r.origin.y / r.direction.y;
+                let p = r.at(t);
+                let inside = match shape {
+                    Shape::Disk { radius } => !(p.x * p.x + p.z * p.z > radius * radius),
+                    _ => true,
+                };
+                dropped += (t > *t_min && t < *t_max && inside) as u32;
+            }
+        }
+    }
+    // Both answers occur often, and dropped hits are among the cases.
+    assert!(
+        hits > total / 10 && hits < total * 9 / 10,
+        "{hits} of {total}"
+    );
+    assert!(dropped >= 6, "{dropped}");
+}
