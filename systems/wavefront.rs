@@ -28,6 +28,7 @@ use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
+use crate::core::rng::SamplerSeed;
 use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -213,6 +214,10 @@ impl HitQueues<'_> {
 #[derive(Resource, Default)]
 pub struct ShadowRays(pub ShadowSegments);
 
+/// Sampler seed of each path of the batch (path transport only).
+#[derive(Resource, Default)]
+pub struct PathSeeds(pub Vec<SamplerSeed>);
+
 /// Radiance gathered so far by each path of the batch.
 #[derive(Resource, Default)]
 pub struct PathRadiance(pub Vec<Color>);
@@ -359,6 +364,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<EscapedRays>();
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
+    world.init_resource::<PathSeeds>();
     world.init_resource::<PathRadiance>();
     world.init_resource::<PixelSums>();
     world.init_resource::<StageScratch>();
@@ -387,6 +393,7 @@ pub fn generate_camera_rays(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut rays: ResMut<CurrentRays>,
+    mut seeds: ResMut<PathSeeds>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
@@ -401,6 +408,7 @@ pub fn generate_camera_rays(
             first,
             count,
             &mut rays.0,
+            &mut seeds.0,
             &mut counters.rays,
         );
     });
@@ -507,6 +515,7 @@ pub struct ShadeParams<'w> {
     frame: Res<'w, WavefrontFrame>,
     rays: Res<'w, CurrentRays>,
     found: Res<'w, BounceHits>,
+    seeds: Res<'w, PathSeeds>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
     shadows: ResMut<'w, ShadowRays>,
@@ -522,13 +531,13 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
         frame,
         rays,
         found,
+        seeds,
         mut scratch,
         mut radiance,
         mut shadows,
         mut next,
         mut stats,
     } = params;
-    let first = frame.batches[frame.batch].0;
     stats.0.run_stage(Stage::shade(C::CLASS), |counters| {
         let to = ShadeTargets {
             radiance: &mut radiance.0,
@@ -540,12 +549,11 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
             C::CLASS,
             &frame.scene,
             &config.settings,
-            &frame.paths,
-            first,
             ShadeInput {
                 rays: &rays.0,
                 found: &found.0,
                 hits: &hits.0,
+                seeds: &seeds.0,
             },
             &mut scratch.shading,
             to,

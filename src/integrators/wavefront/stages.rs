@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, RayCone, max_component};
-use crate::core::rng::Sampler;
+use crate::core::rng::{Sampler, SamplerSeed};
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -39,6 +39,7 @@ use crate::transport::whitted::{direct_light, scatter};
 /// made in parallel chunks. Path `p` goes where `paths` says (sample
 /// `p % spp` of pixel `p / spp` for a whole image), with the same film
 /// position and sample keys as the recursive tracer.
+#[allow(clippy::too_many_arguments)]
 pub fn generate_camera_rays(
     camera: &CameraRays,
     settings: &RenderSettings,
@@ -46,16 +47,31 @@ pub fn generate_camera_rays(
     first: u64,
     count: usize,
     out: &mut RayQueue,
+    seeds: &mut Vec<SamplerSeed>,
     rays: &mut RayCounts,
 ) {
-    out.fill_with(count, |local| {
-        let k = paths.path(first + local as u64);
-        let mut sampler = Sampler::with_kind(
+    let seed = |k: &crate::core::window::PathKey| {
+        SamplerSeed::new(
             settings.sampler,
             settings.seed,
             k.pixel(settings.width),
             k.sample,
-        );
+        )
+    };
+    // Path transport draws numbers at every bounce: each path's sampler
+    // keys are hashed once here, for the shading stages to start from.
+    seeds.clear();
+    if settings.transport == Transport::Path {
+        seeds.resize(count, SamplerSeed::default());
+        seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
+            for (k, s) in s.iter_mut().enumerate() {
+                *s = seed(&paths.path(first + (c * CHUNK + k) as u64));
+            }
+        });
+    }
+    out.fill_with(count, |local| {
+        let k = paths.path(first + local as u64);
+        let mut sampler = seed(&k).sampler();
         RayItem {
             ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
             throughput: Color::ONE,
@@ -339,6 +355,9 @@ pub struct ShadeInput<'a> {
     pub found: &'a ClosestHits,
     /// The rays whose hits this stage shades.
     pub hits: &'a HitQueue,
+    /// Sampler seed of each path of the batch (path transport; empty
+    /// under the other transports, which draw no numbers in shading).
+    pub seeds: &'a [SamplerSeed],
 }
 
 /// Runs `kernel` on every hit of `input.hits` with its interaction, in
@@ -352,7 +371,9 @@ fn shade_hits(
     to: ShadeTargets<'_>,
     kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
 ) {
-    let ShadeInput { rays, found, hits } = input;
+    let ShadeInput {
+        rays, found, hits, ..
+    } = input;
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         for &i in &hits.ray[range] {
@@ -457,19 +478,18 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 /// hit adds its MIS-weighted emission, pushes next-event shadow rays
 /// (`NEE`: the class has a lobe lights can reach) and at most one
 /// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
-/// from the same sample numbers. `first` is the batch's first path.
-/// `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
+/// from the same sample numbers, drawn from the path's sampler seed
+/// (`input.seeds`). `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
 /// ([`volume::diffuse_crossing`]) the kernel then handles (kernels of scenes
 /// without subsurface materials carry none of that code).
 pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
-    paths: &PathMap,
-    first: u64,
     input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
+    let seeds = input.seeds;
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
@@ -478,8 +498,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
         if !NEE && !SCATTER {
             return;
         }
-        let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
-        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
+        let mut sampler = seeds[h.path as usize].sampler();
         let lambda = path::path_wavelength(scene, settings, &mut sampler);
         let spectral;
         let mut crossing = None;
@@ -540,14 +559,11 @@ fn at_wavelength_and_boundary(
 
 /// Stage: shades the hits of `class` with the kernel for the lobes the
 /// class has ([`MaterialClass::is_lit`], [`MaterialClass::scatters`]) and
-/// the settings' transport; `first` is the batch's first path.
-#[allow(clippy::too_many_arguments)]
+/// the settings' transport.
 pub fn shade_class(
     class: MaterialClass,
     scene: &RenderScene,
     settings: &RenderSettings,
-    paths: &PathMap,
-    first: u64,
     input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
@@ -563,7 +579,7 @@ pub fn shade_class(
             ((true, _), false) => shade_path::<true, true, false>,
             ((true, _), true) => shade_path::<true, true, true>,
         };
-        return f(scene, settings, paths, first, input, scratch, to);
+        return f(scene, settings, input, scratch, to);
     }
     let f = match lobes {
         (false, false) => shade::<false, false>,
