@@ -60,8 +60,9 @@ pub fn generate_camera_rays(
     };
     // Path transport draws numbers at every bounce: each path's sampler
     // keys are hashed once here, for the shading stages to start from.
-    seeds.clear();
-    if settings.transport == Transport::Path {
+    if settings.transport != Transport::Path {
+        seeds.clear();
+    } else {
         seeds.resize(count, SamplerSeed::default());
         seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
             for (k, s) in s.iter_mut().enumerate() {
@@ -107,8 +108,9 @@ pub fn intersect_closest(
     // are traced one at a time. Measured faster than mesh streams for
     // camera and for secondary rays since meshes have their own 8-wide
     // layout (README, "Measurement notes").
+    // Every slot is written below: keep what the last bounce left in the
+    // slots (resizing fills only new ones) instead of clearing them first.
     let n = rays.len();
-    found.0.clear();
     found.0.resize(n, None);
     found
         .0
@@ -653,7 +655,6 @@ pub fn trace_shadow_rays(
     let flags = drain_chunks(work.len(), visible, |c, flags| {
         let (s, range) = &work[c];
         let seg = &shadows.segments()[*s];
-        flags.clear();
         flags.resize(range.len(), false);
         for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
             let j = range.start + k * LANES;
