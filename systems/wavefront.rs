@@ -15,7 +15,10 @@
 //!
 //! Each stage system is named after its [`Stage`], under which it counts
 //! its runs and time. [`render_wavefront`] drives these schedules for one
-//! frame.
+//! frame, in one lane per worker thread: each lane is a world with the
+//! same schedules and queues ([`WavefrontLanes`]; lane 0 is the
+//! renderer's own world) and runs whole batches, so a lane's stages follow
+//! one another on its thread without waiting for the other threads.
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
