@@ -221,6 +221,10 @@ pub struct ShadowRays(pub ShadowSegments);
 #[derive(Resource, Default)]
 pub struct PathSeeds(pub Vec<SamplerSeed>);
 
+/// Wavelength of each path of the batch (spectral path transport only).
+#[derive(Resource, Default)]
+pub struct PathWavelengths(pub Vec<f32>);
+
 /// Radiance gathered so far by each path of the batch.
 #[derive(Resource, Default)]
 pub struct PathRadiance(pub Vec<Color>);
@@ -368,6 +372,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathSeeds>();
+    world.init_resource::<PathWavelengths>();
     world.init_resource::<PathRadiance>();
     world.init_resource::<PixelSums>();
     world.init_resource::<StageScratch>();
@@ -397,6 +402,7 @@ pub fn generate_camera_rays(
     frame: Res<WavefrontFrame>,
     mut rays: ResMut<CurrentRays>,
     mut seeds: ResMut<PathSeeds>,
+    mut wavelengths: ResMut<PathWavelengths>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
@@ -414,6 +420,7 @@ pub fn generate_camera_rays(
             &mut seeds.0,
             &mut counters.rays,
         );
+        kernels::path_wavelengths(&frame.scene, &config.settings, &seeds.0, &mut wavelengths.0);
     });
 }
 
@@ -519,6 +526,7 @@ pub struct ShadeParams<'w> {
     rays: Res<'w, CurrentRays>,
     found: Res<'w, BounceHits>,
     seeds: Res<'w, PathSeeds>,
+    wavelengths: Res<'w, PathWavelengths>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
     shadows: ResMut<'w, ShadowRays>,
@@ -535,6 +543,7 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
         rays,
         found,
         seeds,
+        wavelengths,
         mut scratch,
         mut radiance,
         mut shadows,
@@ -557,6 +566,7 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
                 found: &found.0,
                 hits: &hits.0,
                 seeds: &seeds.0,
+                wavelengths: &wavelengths.0,
             },
             &mut scratch.shading,
             to,
@@ -649,9 +659,9 @@ pub fn advance_bounce(
 
 /// Stage: adds the batch's paths to their pixels.
 pub fn update_film(
-    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
+    wavelengths: Res<PathWavelengths>,
     pixels: Res<PixelSums>,
     mut stats: ResMut<WavefrontStats>,
 ) {
@@ -659,9 +669,8 @@ pub fn update_film(
     stats.0.run_stage(Stage::UpdateFilm, |counters| {
         let mut sums = pixels.0.lock().unwrap_or_else(|e| e.into_inner());
         kernels::update_film(
-            &frame.scene,
-            &config.settings,
             &radiance.0,
+            &wavelengths.0,
             &frame.paths,
             first,
             &mut sums,

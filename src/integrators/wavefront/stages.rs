@@ -85,6 +85,31 @@ pub fn generate_camera_rays(
     rays.camera += count as u64;
 }
 
+/// Part of the camera-ray stage in spectral mode (path transport of a
+/// scene with a dispersive material): each path's wavelength, drawn once
+/// per batch from its sampler seed (`seeds`, as
+/// [`generate_camera_rays`] made them) and read by the shading stages
+/// and [`update_film`]; empty otherwise.
+pub fn path_wavelengths(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    seeds: &[SamplerSeed],
+    out: &mut Vec<f32>,
+) {
+    if !(scene.is_spectral() && settings.transport == Transport::Path) {
+        out.clear();
+        return;
+    }
+    out.resize(seeds.len(), 0.0);
+    out.par_chunks_mut(CHUNK)
+        .zip(seeds.par_chunks(CHUNK))
+        .for_each(|(out, seeds)| {
+            for (w, seed) in out.iter_mut().zip(seeds) {
+                *w = path::path_wavelength(scene, settings, &mut seed.sampler()).unwrap_or(0.0);
+            }
+        });
+}
+
 /// Stage: closest hit for every ray of `rays`, written in place into
 /// `found` (chunks traced in parallel), then each ray routed by index to
 /// `escaped` or to the hit queue of the material's class.
@@ -360,6 +385,9 @@ pub struct ShadeInput<'a> {
     /// Sampler seed of each path of the batch (path transport; empty
     /// under the other transports, which draw no numbers in shading).
     pub seeds: &'a [SamplerSeed],
+    /// Wavelength of each path of the batch in spectral mode
+    /// ([`path_wavelengths`]); empty otherwise.
+    pub wavelengths: &'a [f32],
 }
 
 /// Runs `kernel` on every hit of `input.hits` with its interaction, in
@@ -491,7 +519,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    let seeds = input.seeds;
+    let (seeds, wavelengths) = (input.seeds, input.wavelengths);
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
@@ -501,7 +529,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
             return;
         }
         let mut sampler = seeds[h.path as usize].sampler();
-        let lambda = path::path_wavelength(scene, settings, &mut sampler);
+        let lambda = wavelengths.get(h.path as usize).copied();
         let spectral;
         let mut crossing = None;
         let it = if SSS && scene.materials()[h.material as usize].subsurface {
@@ -727,12 +755,11 @@ fn trace_shadow_rays_through_media(
 ///
 /// In spectral mode (path transport of a scene with a dispersive
 /// material) each path's radiance is first weighted by its wavelength's
-/// RGB response, the wavelength drawn again from the path's sampler keys
-/// as the shading stages drew it.
+/// RGB response: `wavelengths` holds each path's (see
+/// [`path_wavelengths`]; empty otherwise).
 pub fn update_film(
-    scene: &RenderScene,
-    settings: &RenderSettings,
     radiance: &[Color],
+    wavelengths: &[f32],
     paths: &PathMap,
     first: u64,
     sums: &mut PixelAccumulator,
@@ -740,15 +767,11 @@ pub fn update_film(
 ) {
     let pixels = sums.pixels_mut();
     let n = paths.samples() as u64;
-    let spectral = scene.is_spectral() && settings.transport == Transport::Path;
     for (local, &l) in radiance.iter().enumerate() {
         let pixel = ((first + local as u64) / n) as usize;
-        let l = if spectral {
-            let (key, sample) = paths.sampler_keys(first + local as u64);
-            let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, key, sample);
-            path::weigh_wavelength(l, path::path_wavelength(scene, settings, &mut sampler))
-        } else {
-            l
+        let l = match wavelengths.get(local) {
+            Some(&w) => path::weigh_wavelength(l, Some(w)),
+            None => l,
         };
         accumulate(&mut pixels[pixel], l, counters);
     }
