@@ -15,10 +15,14 @@
 //!
 //! Each stage system is named after its [`Stage`], under which it counts
 //! its runs and time. [`render_wavefront`] drives these schedules for one
-//! frame.
+//! frame, in one lane per worker thread: each lane is a world with the
+//! same schedules and queues ([`WavefrontLanes`]; lane 0 is the
+//! renderer's own world) and runs whole batches, so a lane's stages follow
+//! one another on its thread without waiting for the other threads.
 
 use std::marker::PhantomData;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use bevy_ecs::prelude::*;
@@ -27,6 +31,7 @@ use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
+use crate::core::rng::SamplerSeed;
 use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -212,13 +217,23 @@ impl HitQueues<'_> {
 #[derive(Resource, Default)]
 pub struct ShadowRays(pub ShadowSegments);
 
+/// Sampler seed of each path of the batch (path transport only).
+#[derive(Resource, Default)]
+pub struct PathSeeds(pub Vec<SamplerSeed>);
+
+/// Wavelength of each path of the batch (spectral path transport only).
+#[derive(Resource, Default)]
+pub struct PathWavelengths(pub Vec<f32>);
+
 /// Radiance gathered so far by each path of the batch.
 #[derive(Resource, Default)]
 pub struct PathRadiance(pub Vec<Color>);
 
-/// Per-pixel sums across batches.
-#[derive(Resource, Default)]
-pub struct PixelSums(pub PixelAccumulator);
+/// Per-pixel sums across batches, shared by the lanes of a frame (each
+/// adds a finished batch under the lock; the sums are exact, so the order
+/// in which batches are added does not matter).
+#[derive(Resource, Default, Clone)]
+pub struct PixelSums(pub Arc<Mutex<PixelAccumulator>>);
 
 /// Reusable per-chunk scratch buffers of the parallel stages.
 #[derive(Resource, Default)]
@@ -256,7 +271,7 @@ impl StageScratch {
 
 /// What stays fixed during a frame: the scene, the camera rays, the
 /// material classes, the batches, and which batch is running.
-#[derive(Resource)]
+#[derive(Resource, Clone)]
 pub struct WavefrontFrame {
     /// The scene being rendered.
     pub scene: Arc<RenderScene>,
@@ -356,6 +371,8 @@ pub fn add_wavefront_schedules(world: &mut World) {
     world.init_resource::<EscapedRays>();
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
+    world.init_resource::<PathSeeds>();
+    world.init_resource::<PathWavelengths>();
     world.init_resource::<PathRadiance>();
     world.init_resource::<PixelSums>();
     world.init_resource::<StageScratch>();
@@ -384,6 +401,8 @@ pub fn generate_camera_rays(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut rays: ResMut<CurrentRays>,
+    mut seeds: ResMut<PathSeeds>,
+    mut wavelengths: ResMut<PathWavelengths>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
@@ -398,8 +417,10 @@ pub fn generate_camera_rays(
             first,
             count,
             &mut rays.0,
+            &mut seeds.0,
             &mut counters.rays,
         );
+        kernels::path_wavelengths(&frame.scene, &config.settings, &seeds.0, &mut wavelengths.0);
     });
 }
 
@@ -504,6 +525,8 @@ pub struct ShadeParams<'w> {
     frame: Res<'w, WavefrontFrame>,
     rays: Res<'w, CurrentRays>,
     found: Res<'w, BounceHits>,
+    seeds: Res<'w, PathSeeds>,
+    wavelengths: Res<'w, PathWavelengths>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
     shadows: ResMut<'w, ShadowRays>,
@@ -519,13 +542,14 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
         frame,
         rays,
         found,
+        seeds,
+        wavelengths,
         mut scratch,
         mut radiance,
         mut shadows,
         mut next,
         mut stats,
     } = params;
-    let first = frame.batches[frame.batch].0;
     stats.0.run_stage(Stage::shade(C::CLASS), |counters| {
         let to = ShadeTargets {
             radiance: &mut radiance.0,
@@ -537,12 +561,12 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
             C::CLASS,
             &frame.scene,
             &config.settings,
-            &frame.paths,
-            first,
             ShadeInput {
                 rays: &rays.0,
                 found: &found.0,
                 hits: &hits.0,
+                seeds: &seeds.0,
+                wavelengths: &wavelengths.0,
             },
             &mut scratch.shading,
             to,
@@ -635,21 +659,21 @@ pub fn advance_bounce(
 
 /// Stage: adds the batch's paths to their pixels.
 pub fn update_film(
-    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
-    mut pixels: ResMut<PixelSums>,
+    wavelengths: Res<PathWavelengths>,
+    pixels: Res<PixelSums>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     let (first, _) = frame.batches[frame.batch];
     stats.0.run_stage(Stage::UpdateFilm, |counters| {
+        let mut sums = pixels.0.lock().unwrap_or_else(|e| e.into_inner());
         kernels::update_film(
-            &frame.scene,
-            &config.settings,
             &radiance.0,
+            &wavelengths.0,
             &frame.paths,
             first,
-            &mut pixels.0,
+            &mut sums,
             counters,
         )
     });
@@ -695,37 +719,140 @@ pub fn render_wavefront(world: &mut World) {
         shadows,
         media,
     });
-    world.insert_resource(PixelSums(PixelAccumulator::new(window_width, window_rows)));
+    let sums = PixelSums(Arc::new(Mutex::new(PixelAccumulator::new(
+        window_width,
+        window_rows,
+    ))));
+    world.insert_resource(sums.clone());
     world.insert_resource(WavefrontStats::default());
+
+    // One lane per worker thread, each a world of its own running whole
+    // batches through the same schedules: a lane's stages run back to
+    // back on its thread, with no wait for the other threads between
+    // stages. Lane 0 is this world.
+    let lanes = rayon::current_num_threads().min(batches.len()).max(1);
+    let mut extra = world
+        .remove_resource::<WavefrontLanes>()
+        .unwrap_or_default();
+    extra.prepare(world, lanes - 1);
 
     let start = Instant::now();
     let rows_per_path =
         1.0 / (window_width as f64 * (world.resource::<WavefrontFrame>().paths.samples()) as f64);
-    let mut rows_reported = 0u64;
-    for (b, &(first, count)) in batches.iter().enumerate() {
-        world.resource_mut::<WavefrontFrame>().batch = b;
-        world.run_schedule(StartBatch);
-        while !world.resource::<CurrentRays>().0.is_empty() {
-            world.run_schedule(Bounce);
+    let progress = LaneProgress {
+        report: config.progress.clone(),
+        rows_per_path,
+        paths_done: AtomicU64::new(0),
+        rows_reported: AtomicU64::new(0),
+    };
+    // Batch 0 goes to lane 0 (so this world's queues always see a batch);
+    // the others go to whichever lane asks first. Each batch's paths are
+    // a pure function of the batch and pixel sums are exact, so the image
+    // does not depend on which lane ran which batch.
+    let next = AtomicUsize::new(1);
+    let (progress, next, batches) = (&progress, &next, &batches[..]);
+    rayon::scope(|s| {
+        for lane in extra.0.iter_mut() {
+            s.spawn(move |_| run_lane(lane, None, next, batches, progress));
         }
-        world.run_schedule(FinishBatch);
-        if let Some(p) = &config.progress {
-            let rows = ((first + count as u64) as f64 * rows_per_path) as u64;
-            p(rows - rows_reported);
-            rows_reported = rows;
-        }
-    }
+        run_lane(world, Some(0), next, batches, progress);
+    });
     let render_seconds = start.elapsed().as_secs_f64();
-    let sums = std::mem::take(&mut world.resource_mut::<PixelSums>().0);
-    let film = sums.resolve();
     let mut report = world.resource::<WavefrontStats>().0;
+    for lane in &extra.0 {
+        report.add_lane(&lane.resource::<WavefrontStats>().0);
+    }
     report.batches = batches.len();
+    report.lanes = lanes;
+    world.insert_resource(extra);
+    let sums = std::mem::take(&mut *sums.0.lock().unwrap_or_else(|e| e.into_inner()));
+    let film = sums.resolve();
     let mut frame = world.resource_mut::<Frame>();
     frame.film = Some(film);
     frame.sums = settings.window.is_some().then_some(sums);
     frame.counters = report.counters;
     frame.render_seconds = render_seconds;
     frame.wavefront = Some(report);
+}
+
+/// The worlds of the wavefront's lanes besides the main world, kept
+/// between frames (with their schedules and grown queues).
+#[derive(Resource, Default)]
+pub struct WavefrontLanes(Vec<World>);
+
+impl WavefrontLanes {
+    /// Makes `count` lane worlds ready for the frame `main` is about to
+    /// render: the main world's settings, frame, pixel sums, batch size
+    /// and gating, and fresh statistics.
+    fn prepare(&mut self, main: &World, count: usize) {
+        self.0.truncate(count);
+        while self.0.len() < count {
+            let mut w = World::new();
+            add_wavefront_schedules(&mut w);
+            self.0.push(w);
+        }
+        let mut config = main.resource::<RenderConfig>().clone();
+        config.progress = None;
+        for w in &mut self.0 {
+            w.insert_resource(config.clone());
+            w.insert_resource(main.resource::<WavefrontFrame>().clone());
+            w.insert_resource(main.resource::<PixelSums>().clone());
+            w.insert_resource(*main.resource::<BatchSize>());
+            w.insert_resource(*main.resource::<StageGating>());
+            w.insert_resource(WavefrontStats::default());
+        }
+    }
+}
+
+/// Progress of a frame rendered by several lanes: rows finished, reported
+/// as batches finish in any order.
+struct LaneProgress {
+    report: Option<super::ProgressFn>,
+    rows_per_path: f64,
+    paths_done: AtomicU64,
+    rows_reported: AtomicU64,
+}
+
+impl LaneProgress {
+    /// Counts `paths` more finished paths and reports the rows they
+    /// complete.
+    fn finished(&self, paths: usize) {
+        let Some(p) = &self.report else { return };
+        let done = self.paths_done.fetch_add(paths as u64, Ordering::Relaxed) + paths as u64;
+        let rows = (done as f64 * self.rows_per_path) as u64;
+        let before = self.rows_reported.fetch_max(rows, Ordering::Relaxed);
+        if rows > before {
+            p(rows - before);
+        }
+    }
+}
+
+/// Runs batches through `world`'s schedules until none is left: `first`
+/// (if any), then the next unclaimed one from `next`, in turn.
+fn run_lane(
+    world: &mut World,
+    first: Option<usize>,
+    next: &AtomicUsize,
+    batches: &[(u64, usize)],
+    progress: &LaneProgress,
+) {
+    let mut batch = first;
+    loop {
+        let b = match batch.take() {
+            Some(b) => b,
+            None => next.fetch_add(1, Ordering::Relaxed),
+        };
+        let Some(&(_, count)) = batches.get(b) else {
+            return;
+        };
+        world.resource_mut::<WavefrontFrame>().batch = b;
+        world.run_schedule(StartBatch);
+        while !world.resource::<CurrentRays>().0.is_empty() {
+            world.run_schedule(Bounce);
+        }
+        world.run_schedule(FinishBatch);
+        progress.finished(count);
+    }
 }
 
 /// Stage times of the last frame (zero for the recursive integrator).

@@ -54,6 +54,47 @@ pub struct Sampler {
     cached: [f32; 4],
 }
 
+/// The hashed keys of one pixel sample's [`Sampler`], computed once: a
+/// stage that draws numbers for the same path at every bounce keeps the
+/// seed and makes the sampler from it without hashing the keys again
+/// ([`SamplerSeed::sampler`] is [`Sampler::with_kind`] of the same
+/// arguments).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SamplerSeed {
+    key: u64,
+    pixel_key: u64,
+    sample: u32,
+    sobol: bool,
+}
+
+impl SamplerSeed {
+    /// The seed of the sampler of `kind` for sample `sample` of pixel
+    /// `pixel` under `seed`.
+    #[inline]
+    pub fn new(kind: SamplerKind, seed: u64, pixel: u32, sample: u32) -> Self {
+        Self {
+            key: mix64(seed ^ mix64(((pixel as u64) << 32) | sample as u64)),
+            pixel_key: mix64(seed.rotate_left(17) ^ mix64(pixel as u64 ^ 0x5bd1_e995_0000_0000)),
+            sample,
+            sobol: kind == SamplerKind::Sobol && sample < SOBOL_SAMPLES,
+        }
+    }
+
+    /// A sampler at dimension 0.
+    #[inline]
+    pub fn sampler(&self) -> Sampler {
+        Sampler {
+            key: self.key,
+            pixel_key: self.pixel_key,
+            sample: self.sample,
+            dimension: 0,
+            sobol: self.sobol,
+            cached_set: u32::MAX,
+            cached: [0.0; 4],
+        }
+    }
+}
+
 /// A 64-bit finaliser (the "splitmix64" mixing function).
 #[inline]
 fn mix64(mut z: u64) -> u64 {
@@ -74,17 +115,7 @@ impl Sampler {
     /// `seed`.
     #[inline]
     pub fn with_kind(kind: SamplerKind, seed: u64, pixel: u32, sample: u32) -> Self {
-        let key = mix64(seed ^ mix64(((pixel as u64) << 32) | sample as u64));
-        let pixel_key = mix64(seed.rotate_left(17) ^ mix64(pixel as u64 ^ 0x5bd1_e995_0000_0000));
-        Self {
-            key,
-            pixel_key,
-            sample,
-            dimension: 0,
-            sobol: kind == SamplerKind::Sobol && sample < SOBOL_SAMPLES,
-            cached_set: u32::MAX,
-            cached: [0.0; 4],
-        }
+        SamplerSeed::new(kind, seed, pixel, sample).sampler()
     }
 
     /// Jumps to dimension `d` (integrators give each bounce a fixed

@@ -149,6 +149,43 @@ fn each_integrator_is_bit_identical_whatever_the_thread_count() {
     }
 }
 
+/// With several worker threads the wavefront runs batches side by side,
+/// one lane (world) per thread, each batch on whichever lane asks first:
+/// the frame (image, ray counts, stage runs) is the one a single lane
+/// gives, bit for bit, and every lane really ran.
+#[test]
+fn lanes_running_batches_side_by_side_give_the_one_lane_frame() {
+    let path = assets().join("cornell.toml");
+    let s = RenderSettings {
+        transport: prism::core::settings::Transport::Path,
+        max_depth: 5,
+        ..settings(32, 24, 4)
+    };
+    let frame = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| render(&path, IntegratorKind::Wavefront, &s, 200))
+    };
+    let one = frame(1);
+    let w1 = one.wavefront.unwrap();
+    assert_eq!((w1.lanes, w1.batches), (1, 16));
+    for threads in [2, 3, 5] {
+        let many = frame(threads);
+        let w = many.wavefront.unwrap();
+        assert_eq!(w.lanes, threads, "{threads} threads");
+        assert_eq!(w.batches, 16);
+        assert_eq!(
+            film_bits(one.film.as_ref().unwrap()),
+            film_bits(many.film.as_ref().unwrap()),
+            "{threads} threads"
+        );
+        assert_eq!(one.counters, many.counters, "{threads} threads");
+        assert_eq!(w1.runs, w.runs, "{threads} threads");
+    }
+}
+
 /// A world ready to step through the wavefront stages by hand.
 fn stepping_world(scene_toml: &str, s: RenderSettings) -> Renderer {
     let mut r = renderer(

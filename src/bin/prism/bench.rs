@@ -460,7 +460,10 @@ fn print_table(r: &SceneResult) {
             .into_iter()
             .map(|(key, seconds)| format!("{key} {seconds:.4}"))
             .collect();
-        println!("  wavefront stages (s): {}", stages.join(", "));
+        println!(
+            "  wavefront stages (thread-seconds, summed over lanes): {}",
+            stages.join(", ")
+        );
     }
     println!(
         "  speedup of the wavefront over recursive: {:.2}x (medians), {:.2}x (fastest runs)",

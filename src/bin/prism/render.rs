@@ -840,6 +840,7 @@ fn render_with_pool(
             stage_seconds: w.stages,
             peak_queue_bytes: w.peak_queue_bytes,
             batches: w.batches,
+            lanes: w.lanes,
             batch_paths,
             stages_run: w.runs.names_run(),
             stage_runs: w.runs,

@@ -90,12 +90,14 @@ pub struct RenderStats {
 /// The wavefront integrator's own figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct WavefrontStatsJson {
-    /// Seconds per stage.
+    /// Seconds per stage, summed over the lanes (thread time).
     pub stage_seconds: StageSeconds,
-    /// Largest total of bytes held by all queues at once.
+    /// Largest total of bytes held by one lane's queues at once.
     pub peak_queue_bytes: usize,
     /// Number of batches.
     pub batches: usize,
+    /// Lanes that ran batches side by side (one per worker thread).
+    pub lanes: usize,
     /// Paths per batch.
     pub batch_paths: usize,
     /// The stage systems that ran (stages the scene does not need do not).

@@ -176,6 +176,13 @@ impl StageSeconds {
         keys
     }
 
+    /// Adds every stage's seconds of `other` (another lane's).
+    pub fn add_all(&mut self, other: &StageSeconds) {
+        for (a, b) in self.0.iter_mut().zip(other.0) {
+            *a += b;
+        }
+    }
+
     /// Sum of all stages.
     pub fn total(&self) -> f64 {
         self.0.iter().sum()
@@ -210,6 +217,13 @@ impl StageRuns {
         self.0[stage as usize] += 1;
     }
 
+    /// Adds every stage's runs of `other` (another lane's).
+    pub fn add_all(&mut self, other: &StageRuns) {
+        for (a, b) in self.0.iter_mut().zip(other.0) {
+            *a += b;
+        }
+    }
+
     /// Names of the stages that ran at least once, in stage order.
     pub fn names_run(&self) -> Vec<&'static str> {
         Stage::ALL
@@ -237,15 +251,31 @@ pub struct WavefrontReport {
     pub runs: StageRuns,
     /// Rays and dropped samples.
     pub counters: RenderCounters,
-    /// Time per stage.
+    /// Time per stage, summed over the lanes that ran batches side by
+    /// side (thread time: with two lanes, about twice the wall time).
     pub stages: StageSeconds,
-    /// Largest total of bytes held by all queues at once.
+    /// Largest total of bytes held by one lane's queues at once (the
+    /// largest of the lanes'): what a batch needs. The lanes together
+    /// hold at most `lanes` times as much.
     pub peak_queue_bytes: usize,
     /// Number of batches.
     pub batches: usize,
+    /// Number of lanes: worlds that ran batches side by side, one per
+    /// worker thread (at most one per batch).
+    pub lanes: usize,
 }
 
 impl WavefrontReport {
+    /// Adds the report of another lane of the same frame: runs, counters
+    /// and stage seconds (which then add up the lanes' thread time) are
+    /// summed, queue bytes are the larger peak.
+    pub fn add_lane(&mut self, other: &WavefrontReport) {
+        self.runs.add_all(&other.runs);
+        self.counters.add(&other.counters);
+        self.stages.add_all(&other.stages);
+        self.peak_queue_bytes = self.peak_queue_bytes.max(other.peak_queue_bytes);
+    }
+
     /// Runs `f` as one run of `stage`: counts the run and adds the time
     /// `f` takes to the stage's. `f` gets the counters to fill.
     pub fn run_stage<R>(&mut self, stage: Stage, f: impl FnOnce(&mut RenderCounters) -> R) -> R {

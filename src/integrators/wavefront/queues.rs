@@ -139,7 +139,7 @@ impl RayQueue {
     /// Replaces the queue's rays with `item(0)`, ..., `item(count - 1)`,
     /// made in parallel chunks of [`CHUNK`] rays, each written in place.
     pub fn fill_with(&mut self, count: usize, item: impl Fn(usize) -> RayItem + Sync) {
-        self.clear();
+        // Every slot is written below: resizing fills only the new ones.
         self.origin.resize(count, Vec3A::ZERO);
         self.direction.resize(count, Vec3A::ZERO);
         self.throughput.resize(count, Color::ZERO);

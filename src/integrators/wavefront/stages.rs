@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::accel::packet::LANES;
 use crate::core::math::{Color, Ray, RayCone, max_component};
-use crate::core::rng::Sampler;
+use crate::core::rng::{Sampler, SamplerSeed};
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -39,6 +39,7 @@ use crate::transport::whitted::{direct_light, scatter};
 /// made in parallel chunks. Path `p` goes where `paths` says (sample
 /// `p % spp` of pixel `p / spp` for a whole image), with the same film
 /// position and sample keys as the recursive tracer.
+#[allow(clippy::too_many_arguments)]
 pub fn generate_camera_rays(
     camera: &CameraRays,
     settings: &RenderSettings,
@@ -46,16 +47,32 @@ pub fn generate_camera_rays(
     first: u64,
     count: usize,
     out: &mut RayQueue,
+    seeds: &mut Vec<SamplerSeed>,
     rays: &mut RayCounts,
 ) {
-    out.fill_with(count, |local| {
-        let k = paths.path(first + local as u64);
-        let mut sampler = Sampler::with_kind(
+    let seed = |k: &crate::core::window::PathKey| {
+        SamplerSeed::new(
             settings.sampler,
             settings.seed,
             k.pixel(settings.width),
             k.sample,
-        );
+        )
+    };
+    // Path transport draws numbers at every bounce: each path's sampler
+    // keys are hashed once here, for the shading stages to start from.
+    if settings.transport != Transport::Path {
+        seeds.clear();
+    } else {
+        seeds.resize(count, SamplerSeed::default());
+        seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
+            for (k, s) in s.iter_mut().enumerate() {
+                *s = seed(&paths.path(first + (c * CHUNK + k) as u64));
+            }
+        });
+    }
+    out.fill_with(count, |local| {
+        let k = paths.path(first + local as u64);
+        let mut sampler = seed(&k).sampler();
         RayItem {
             ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
             throughput: Color::ONE,
@@ -66,6 +83,31 @@ pub fn generate_camera_rays(
         }
     });
     rays.camera += count as u64;
+}
+
+/// Part of the camera-ray stage in spectral mode (path transport of a
+/// scene with a dispersive material): each path's wavelength, drawn once
+/// per batch from its sampler seed (`seeds`, as
+/// [`generate_camera_rays`] made them) and read by the shading stages
+/// and [`update_film`]; empty otherwise.
+pub fn path_wavelengths(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    seeds: &[SamplerSeed],
+    out: &mut Vec<f32>,
+) {
+    if !(scene.is_spectral() && settings.transport == Transport::Path) {
+        out.clear();
+        return;
+    }
+    out.resize(seeds.len(), 0.0);
+    out.par_chunks_mut(CHUNK)
+        .zip(seeds.par_chunks(CHUNK))
+        .for_each(|(out, seeds)| {
+            for (w, seed) in out.iter_mut().zip(seeds) {
+                *w = path::path_wavelength(scene, settings, &mut seed.sampler()).unwrap_or(0.0);
+            }
+        });
 }
 
 /// Stage: closest hit for every ray of `rays`, written in place into
@@ -91,8 +133,9 @@ pub fn intersect_closest(
     // are traced one at a time. Measured faster than mesh streams for
     // camera and for secondary rays since meshes have their own 8-wide
     // layout (README, "Measurement notes").
+    // Every slot is written below: keep what the last bounce left in the
+    // slots (resizing fills only new ones) instead of clearing them first.
     let n = rays.len();
-    found.0.clear();
     found.0.resize(n, None);
     found
         .0
@@ -339,6 +382,12 @@ pub struct ShadeInput<'a> {
     pub found: &'a ClosestHits,
     /// The rays whose hits this stage shades.
     pub hits: &'a HitQueue,
+    /// Sampler seed of each path of the batch (path transport; empty
+    /// under the other transports, which draw no numbers in shading).
+    pub seeds: &'a [SamplerSeed],
+    /// Wavelength of each path of the batch in spectral mode
+    /// ([`path_wavelengths`]); empty otherwise.
+    pub wavelengths: &'a [f32],
 }
 
 /// Runs `kernel` on every hit of `input.hits` with its interaction, in
@@ -352,7 +401,9 @@ fn shade_hits(
     to: ShadeTargets<'_>,
     kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
 ) {
-    let ShadeInput { rays, found, hits } = input;
+    let ShadeInput {
+        rays, found, hits, ..
+    } = input;
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         for &i in &hits.ray[range] {
@@ -457,19 +508,18 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 /// hit adds its MIS-weighted emission, pushes next-event shadow rays
 /// (`NEE`: the class has a lobe lights can reach) and at most one
 /// continuation ray (`SCATTER`), chosen as the recursive tracer chooses it
-/// from the same sample numbers. `first` is the batch's first path.
-/// `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
+/// from the same sample numbers, drawn from the path's sampler seed
+/// (`input.seeds`). `SSS`: the class may hold subsurface surfaces, whose diffuse boundary
 /// ([`volume::diffuse_crossing`]) the kernel then handles (kernels of scenes
 /// without subsurface materials carry none of that code).
 pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
-    paths: &PathMap,
-    first: u64,
     input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
+    let (seeds, wavelengths) = (input.seeds, input.wavelengths);
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
@@ -478,9 +528,8 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
         if !NEE && !SCATTER {
             return;
         }
-        let (pixel, sample) = paths.sampler_keys(first + h.path as u64);
-        let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
-        let lambda = path::path_wavelength(scene, settings, &mut sampler);
+        let mut sampler = seeds[h.path as usize].sampler();
+        let lambda = wavelengths.get(h.path as usize).copied();
         let spectral;
         let mut crossing = None;
         let it = if SSS && scene.materials()[h.material as usize].subsurface {
@@ -540,14 +589,11 @@ fn at_wavelength_and_boundary(
 
 /// Stage: shades the hits of `class` with the kernel for the lobes the
 /// class has ([`MaterialClass::is_lit`], [`MaterialClass::scatters`]) and
-/// the settings' transport; `first` is the batch's first path.
-#[allow(clippy::too_many_arguments)]
+/// the settings' transport.
 pub fn shade_class(
     class: MaterialClass,
     scene: &RenderScene,
     settings: &RenderSettings,
-    paths: &PathMap,
-    first: u64,
     input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
@@ -563,7 +609,7 @@ pub fn shade_class(
             ((true, _), false) => shade_path::<true, true, false>,
             ((true, _), true) => shade_path::<true, true, true>,
         };
-        return f(scene, settings, paths, first, input, scratch, to);
+        return f(scene, settings, input, scratch, to);
     }
     let f = match lobes {
         (false, false) => shade::<false, false>,
@@ -601,11 +647,16 @@ impl ShadowScratch {
 /// Stage: traces every shadow ray, stopping at the first blocker, and adds
 /// the radiance of the unblocked ones to their paths, in queue order.
 ///
-/// Eight consecutive shadow rays (mostly one hit point's rays to eight
-/// lights) go through the top level as a packet, and each lane traverses
-/// meshes alone: whole packets, also with rays binned by light, were
-/// measured slower than single rays, because the single-ray node test is
-/// SIMD across a node's eight children already.
+/// Eight consecutive shadow rays that point into one octant (the rays of
+/// neighbouring camera hits, or of one pixel's samples, to one light) go
+/// through the top level as a packet, and each lane traverses meshes
+/// alone: whole packets, also with rays binned by light, were measured
+/// slower than single rays, because the single-ray node test is SIMD
+/// across a node's eight children already. Eight rays pointing apart (a
+/// deeper bounce's scattered hits, or one hit's rays to lights all around)
+/// are traced one at a time, which costs them fewer instructions than a
+/// packet (callgrind, 16 spp: 1-2% of the whole wavefront on the Cornell
+/// boxes, `glass_mirror` and `many_lights`).
 ///
 /// In a scene with media under path transport (`through_media`) each
 /// shadow ray is followed one at a time through the media and boundaries
@@ -632,16 +683,18 @@ pub fn trace_shadow_rays(
     let flags = drain_chunks(work.len(), visible, |c, flags| {
         let (s, range) = &work[c];
         let seg = &shadows.segments()[*s];
-        flags.clear();
         flags.resize(range.len(), false);
         for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
             let j = range.start + k * LANES;
-            let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(lanes.len() - 1)));
-            let blocked = scene.occluded_packet_with(
-                &rays[..lanes.len()],
-                &seg.t_max[j..j + lanes.len()],
-                false,
-            );
+            let m = lanes.len();
+            let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(m - 1)));
+            if !one_octant(&rays[..m]) {
+                for ((v, r), &t_max) in lanes.iter_mut().zip(&rays[..m]).zip(&seg.t_max[j..]) {
+                    *v = !scene.occluded(r, 0.0, t_max);
+                }
+                continue;
+            }
+            let blocked = scene.occluded_packet_with(&rays[..m], &seg.t_max[j..j + m], false);
             for (l, v) in lanes.iter_mut().enumerate() {
                 *v = blocked & (1 << l) == 0;
             }
@@ -702,12 +755,11 @@ fn trace_shadow_rays_through_media(
 ///
 /// In spectral mode (path transport of a scene with a dispersive
 /// material) each path's radiance is first weighted by its wavelength's
-/// RGB response, the wavelength drawn again from the path's sampler keys
-/// as the shading stages drew it.
+/// RGB response: `wavelengths` holds each path's (see
+/// [`path_wavelengths`]; empty otherwise).
 pub fn update_film(
-    scene: &RenderScene,
-    settings: &RenderSettings,
     radiance: &[Color],
+    wavelengths: &[f32],
     paths: &PathMap,
     first: u64,
     sums: &mut PixelAccumulator,
@@ -715,15 +767,11 @@ pub fn update_film(
 ) {
     let pixels = sums.pixels_mut();
     let n = paths.samples() as u64;
-    let spectral = scene.is_spectral() && settings.transport == Transport::Path;
     for (local, &l) in radiance.iter().enumerate() {
         let pixel = ((first + local as u64) / n) as usize;
-        let l = if spectral {
-            let (key, sample) = paths.sampler_keys(first + local as u64);
-            let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, key, sample);
-            path::weigh_wavelength(l, path::path_wavelength(scene, settings, &mut sampler))
-        } else {
-            l
+        let l = match wavelengths.get(local) {
+            Some(&w) => path::weigh_wavelength(l, Some(w)),
+            None => l,
         };
         accumulate(&mut pixels[pixel], l, counters);
     }
