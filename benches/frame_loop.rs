@@ -93,7 +93,11 @@ fn frame_loop(c: &mut Criterion) {
                 run_frame(&mut world, &mut schedule);
                 let f = world.resource::<Frame>();
                 assert!(f.error.is_none() && f.film.is_some());
-                assert!(f.update.moved > 0 && f.update.mesh_bvh_builds > 0);
+                assert!(
+                    f.update.moved > 0 && f.update.mesh_bvh_builds > 0,
+                    "frame {frame_no}: {:?}",
+                    f.update
+                );
                 sums[0] += f.update.sync_seconds;
                 sums[1] += f.update.accel_seconds;
                 sums[2] += f.render_seconds;

@@ -764,6 +764,7 @@ pub fn render_wavefront(world: &mut World) {
     }
     report.batches = batches.len();
     report.lanes = lanes;
+    extra.release();
     world.insert_resource(extra);
     let sums = std::mem::take(&mut *sums.0.lock().unwrap_or_else(|e| e.into_inner()));
     let film = sums.resolve();
@@ -800,6 +801,20 @@ impl WavefrontLanes {
             w.insert_resource(*main.resource::<BatchSize>());
             w.insert_resource(*main.resource::<StageGating>());
             w.insert_resource(WavefrontStats::default());
+        }
+    }
+}
+
+impl WavefrontLanes {
+    /// Drops what the lanes hold of the finished frame. Their copies of
+    /// [`WavefrontFrame`] share the scene: kept until the next frame, they
+    /// made the scene look shared to the next scene sync, which then
+    /// rebuilt everything from scratch every frame (the frame loop's
+    /// moved objects became 22 fresh instances and 4 mesh BVH builds).
+    fn release(&mut self) {
+        for w in &mut self.0 {
+            w.remove_resource::<WavefrontFrame>();
+            w.remove_resource::<PixelSums>();
         }
     }
 }

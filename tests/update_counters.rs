@@ -17,12 +17,14 @@ use prism::core::settings::RenderSettings;
 use prism::geometry::mesh::{BuildQuality, Mesh, NormalMode, mesh_bvh_builds};
 use prism::geometry::shapes::Shape;
 use prism::geometry::transform::Transform;
+use prism::integrators::IntegratorKind;
 use prism::scene::camera::Camera;
 use prism::scene::light::Light;
 use prism::scene::material::Material;
 use prism::systems::MeshInstance;
 use prism::systems::sync::SceneSync;
-use prism::systems::{Frame, PrismPlugin, RenderOrigin, SceneAccel, run_frame};
+use prism::systems::wavefront::BatchSize;
+use prism::systems::{Frame, PrismPlugin, RenderConfig, RenderOrigin, SceneAccel, run_frame};
 
 use common::render::plugin_world;
 
@@ -49,14 +51,31 @@ fn material_hit(world: &World, ray: &Ray) -> Color {
 #[test]
 fn each_change_does_only_its_own_work() {
     let knots = [knot(2, 3), knot(3, 5)];
+    check(&knots, IntegratorKind::Recursive);
+    // The wavefront on two threads with small batches runs two lanes
+    // (worlds of their own), whose frame resources must not keep the
+    // scene shared into the next frame's sync.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    pool.install(|| check(&knots, IntegratorKind::Wavefront));
+}
+
+fn check(knots: &[Arc<Mesh>; 2], integrator: IntegratorKind) {
     let built = mesh_bvh_builds();
     assert!(built >= 2);
-    let (mut world, mut schedule) = plugin_world(PrismPlugin::new().settings(RenderSettings {
-        width: 16,
-        height: 12,
-        max_depth: 2,
+    let (mut world, mut schedule) = plugin_world(PrismPlugin::new().config(RenderConfig {
+        settings: RenderSettings {
+            width: 16,
+            height: 12,
+            max_depth: 2,
+            ..Default::default()
+        },
+        integrator,
         ..Default::default()
     }));
+    world.insert_resource(BatchSize(32));
     // 20 objects on a grid: one change is 5% churn, below the threshold.
     let mut objects = Vec::new();
     for i in 0..20 {
@@ -85,6 +104,10 @@ fn each_change_does_only_its_own_work() {
         ..Default::default()
     });
     run_frame(&mut world, &mut schedule);
+    if integrator == IntegratorKind::Wavefront {
+        let lanes = world.resource::<Frame>().wavefront.unwrap().lanes;
+        assert_eq!(lanes, 2, "the wavefront ran {lanes} lanes");
+    }
     let (c0, u0, m0) = counters(&world);
     assert_eq!(u0, TlasUpdate::Rebuilt);
     assert_eq!(m0, built, "the first frame built a mesh BVH");
