@@ -134,7 +134,8 @@ impl ShadeOutput {
         for group in self.order.chunks(LANES) {
             let m = group.len();
             let rays: [Ray; LANES] = std::array::from_fn(|l| q.ray(group[l.min(m - 1)] as usize));
-            let t_max: [f32; LANES] = std::array::from_fn(|l| q.t_max[group[l.min(m - 1)] as usize]);
+            let t_max: [f32; LANES] =
+                std::array::from_fn(|l| q.t_max[group[l.min(m - 1)] as usize]);
             let blocked = occluded(&rays[..m], &t_max[..m]);
             for (l, &j) in group.iter().enumerate() {
                 self.visible[j as usize] = blocked & (1 << l) == 0;
@@ -361,7 +362,11 @@ mod tests {
         let groups = groups.into_inner();
         assert!(groups.iter().all(|g| !g.is_empty() && g.len() <= LANES));
         assert_eq!(groups.concat(), by_slot);
-        assert_eq!(groups[0].len(), LANES, "the hits' first rays share a packet");
+        assert_eq!(
+            groups[0].len(),
+            LANES,
+            "the hits' first rays share a packet"
+        );
         // Passed on: the even keys, in queue order.
         let in_queue_order: Vec<u32> = counts
             .iter()
