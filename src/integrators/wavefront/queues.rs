@@ -154,6 +154,18 @@ impl RayQueue {
     /// Replaces the queue's rays with `item(0)`, ..., `item(count - 1)`,
     /// made in parallel chunks of [`CHUNK`] rays, each written in place.
     pub fn fill_with(&mut self, count: usize, item: impl Fn(usize) -> RayItem + Sync) {
+        self.fill_chunks(count, |range| range.map(&item));
+    }
+
+    /// Replaces the queue's rays with `count` rays made in parallel chunks
+    /// of [`CHUNK`] rays, each written in place: `items(range)` gives the
+    /// rays of the indices `range` in order (at least `range.len()` of
+    /// them).
+    pub fn fill_chunks<I: Iterator<Item = RayItem>>(
+        &mut self,
+        count: usize,
+        items: impl Fn(std::ops::Range<usize>) -> I + Sync,
+    ) {
         // Every slot is written below: resizing fills only the new ones.
         self.origin.resize(count, Vec3A::ZERO);
         self.direction.resize(count, Vec3A::ZERO);
@@ -175,8 +187,10 @@ impl RayQueue {
             .enumerate()
             .for_each(
                 |(c, (origin, direction, throughput, path, depth, pdf, cone))| {
+                    let start = c * CHUNK;
+                    let mut items = items(start..start + origin.len());
                     for k in 0..origin.len() {
-                        let it = item(c * CHUNK + k);
+                        let it = items.next().expect("a ray per index");
                         debug_assert!(
                             it.ray.origin.is_finite() && it.ray.direction.is_finite(),
                             "non-finite ray: {it:?}"

@@ -58,6 +58,9 @@ pub fn generate_camera_rays(
             k.sample,
         )
     };
+    // Each chunk walks its consecutive paths' keys (`PathMap::paths_from`)
+    // instead of dividing each path index out.
+    let keys = |start: usize| paths.paths_from(first + start as u64);
     // Path transport draws numbers at every bounce: each path's sampler
     // keys are hashed once here, for the shading stages to start from.
     if settings.transport != Transport::Path {
@@ -65,26 +68,27 @@ pub fn generate_camera_rays(
     } else {
         seeds.resize(count, SamplerSeed::default());
         seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
-            for (k, s) in s.iter_mut().enumerate() {
-                *s = seed(&paths.path(first + (c * CHUNK + k) as u64));
+            for (s, k) in s.iter_mut().zip(keys(c * CHUNK)) {
+                *s = seed(&k);
             }
         });
     }
     let seeds: &[SamplerSeed] = seeds;
-    out.fill_with(count, |local| {
-        let k = paths.path(first + local as u64);
-        let mut sampler = match seeds.get(local) {
-            Some(s) => s.sampler(),
-            None => seed(&k).sampler(),
-        };
-        RayItem {
-            ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
-            throughput: Color::ONE,
-            path: local as u32,
-            depth: 0,
-            pdf: 0.0,
-            cone: camera.cone(),
-        }
+    out.fill_chunks(count, |range| {
+        keys(range.start).zip(range).map(|(k, local)| {
+            let mut sampler = match seeds.get(local) {
+                Some(s) => s.sampler(),
+                None => seed(&k).sampler(),
+            };
+            RayItem {
+                ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
+                throughput: Color::ONE,
+                path: local as u32,
+                depth: 0,
+                pdf: 0.0,
+                cone: camera.cone(),
+            }
+        })
     });
     rays.camera += count as u64;
 }
