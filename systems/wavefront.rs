@@ -40,7 +40,7 @@ use crate::integrators::wavefront::queues::{
 };
 use crate::integrators::wavefront::routing::{ClassHitQueues, ShadeTargets};
 use crate::integrators::wavefront::stages::{
-    self as kernels, MediaScratch, MediaTargets, ShadeInput, ShadeScratch, ShadowScratch,
+    self as kernels, MediaScratch, MediaTargets, ShadeInput, ShadeScratch,
 };
 use crate::integrators::wavefront::{self, Stage, StageSeconds, WavefrontReport};
 use crate::scene::RenderScene;
@@ -213,7 +213,8 @@ impl HitQueues<'_> {
     }
 }
 
-/// Shadow rays of this bounce.
+/// What this bounce's shadow rays bring back: their stages trace them
+/// and queue the radiance of those unblocked.
 #[derive(Resource, Default)]
 pub struct ShadowRays(pub ShadowSegments);
 
@@ -240,7 +241,6 @@ pub struct PixelSums(pub Arc<Mutex<PixelAccumulator>>);
 pub struct StageScratch {
     media: MediaScratch,
     shading: ShadeScratch,
-    shadows: ShadowScratch,
 }
 
 impl StageScratch {
@@ -264,7 +264,6 @@ impl StageScratch {
     /// Bytes allocated by all scratch buffers.
     pub fn bytes(&self) -> usize {
         self.media.iter().map(|c| c.bytes()).sum::<usize>()
-            + self.shadows.bytes()
             + self.shading.iter().map(|s| s.bytes()).sum::<usize>()
     }
 }
@@ -455,6 +454,7 @@ pub fn sample_media(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut rays: ResMut<CurrentRays>,
+    seeds: Res<PathSeeds>,
     mut found: ResMut<BounceHits>,
     mut escaped: ResMut<EscapedRays>,
     mut hits: HitQueuesMut,
@@ -464,7 +464,6 @@ pub fn sample_media(
     mut next: ResMut<NextRays>,
     mut stats: ResMut<WavefrontStats>,
 ) {
-    let first = frame.batches[frame.batch].0;
     stats.0.run_stage(Stage::SampleMedia, |counters| {
         // Forced to run (`StageGating::force_all`) in a scene without
         // media, the stage has nothing to do: the closest-hit stage has
@@ -485,8 +484,7 @@ pub fn sample_media(
         kernels::sample_media(
             &frame.scene,
             &config.settings,
-            &frame.paths,
-            first,
+            &seeds.0,
             &frame.classes,
             &mut rays.0,
             &mut found.0,
@@ -601,22 +599,15 @@ pub fn shade_general(hits: ResMut<Hits<General>>, params: ShadeParams) {
     shade_stage(hits, params)
 }
 
-/// Stage: traces the shadow rays; drains the shadow queue.
+/// Stage: adds the light of the shadow rays that the medium and shading
+/// stages traced to the paths; drains the shadow queue.
 pub fn trace_shadow_rays(
-    frame: Res<WavefrontFrame>,
     mut shadows: ResMut<ShadowRays>,
-    mut scratch: ResMut<StageScratch>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
 ) {
     stats.0.run_stage(Stage::TraceShadowRays, |_| {
-        kernels::trace_shadow_rays(
-            &frame.scene,
-            &shadows.0,
-            &mut scratch.shadows,
-            &mut radiance.0,
-            frame.media,
-        );
+        kernels::trace_shadow_rays(&shadows.0, &mut radiance.0);
         shadows.0.clear();
     });
 }

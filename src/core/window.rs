@@ -177,6 +177,34 @@ impl PathMap {
         }
     }
 
+    /// The keys of paths `first`, `first + 1`, ... (up to the window's
+    /// last path): each [`PathMap::path`] of its index, stepped from the
+    /// previous one instead of divided out (for stages that walk a run of
+    /// consecutive paths).
+    pub fn paths_from(&self, first: u64) -> impl Iterator<Item = PathKey> + '_ {
+        let count = self.path_count().saturating_sub(first);
+        let mut k = (first < self.path_count()).then(|| self.path(first));
+        let mut row = k.map_or(0, |k| (k.window_pixel / self.columns as u64) as usize);
+        (0..count).map(move |_| {
+            let key = k.expect("a path is left");
+            let mut next = key;
+            next.sample += 1;
+            if next.sample == self.s0 + self.samples {
+                next.sample = self.s0;
+                next.window_pixel += 1;
+                next.x += 1;
+                if next.x == self.x0 + self.columns {
+                    next.x = self.x0;
+                    row += 1;
+                    // Past the last row only when `key` was the last path.
+                    next.y = self.rows.get(row).copied().unwrap_or(0);
+                }
+            }
+            k = Some(next);
+            key
+        })
+    }
+
     /// The image-wide pixel index and sample index of path `p`, the keys
     /// of its random numbers.
     #[inline]
@@ -218,6 +246,31 @@ pub fn shard_rows(index: u32, count: u32, height: u32) -> Result<Vec<Range<u32>>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Walking consecutive paths gives each path's keys, from any start,
+    /// in windows of several rows, columns and sample ranges.
+    #[test]
+    #[allow(clippy::single_range_in_vec_init)] // one range of rows, meant
+    fn walking_paths_gives_each_paths_keys() {
+        for (columns, rows, samples) in [
+            (0..7u32, vec![2..4u32, 6..7], 1..4u32),
+            (3..4, vec![0..5], 0..1),
+            (0..5, vec![1..2], 2..3),
+        ] {
+            let window = RenderWindow {
+                columns,
+                rows,
+                samples,
+            };
+            let map = PathMap::new(&window, 9);
+            let n = map.path_count();
+            for first in [0, 1, 5, n - 1, n] {
+                let walked: Vec<PathKey> = map.paths_from(first).collect();
+                let divided: Vec<PathKey> = (first..n).map(|p| map.path(p)).collect();
+                assert_eq!(walked, divided, "{window:?} from {first}");
+            }
+        }
+    }
 
     #[test]
     fn shard_rows_partition_the_image_and_interleave() {

@@ -124,7 +124,9 @@ stages! {
     ShadeGlass = "shade_glass" shades Glass,
     /// Shading of materials with several lobes.
     ShadeGeneral = "shade_general" shades General,
-    /// Shadow-ray tracing.
+    /// Adding the light of the bounce's shadow rays to their paths (the
+    /// rays are traced by the stages that make them, chunk by chunk, and
+    /// the time spent tracing them counts as theirs).
     TraceShadowRays = "trace_shadow_rays",
     /// Adding finished paths to the film (once per batch).
     UpdateFilm = "update_film",

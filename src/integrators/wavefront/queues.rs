@@ -23,7 +23,8 @@ fn vec_bytes<T>(v: &Vec<T>) -> usize {
 }
 
 /// The field-by-field methods every structure-of-arrays queue has: length
-/// (of the field `$len`), `clear`, `append` and [`QueueBytes`], over the
+/// (of the field `$len`), `clear`, `append`, [`QueueBytes`] and
+/// [`Segment`], over the
 /// listed fields, which must be all of the queue's `Vec`s.
 macro_rules! soa_queue {
     ($queue:ident, $what:literal, $len:ident, [$($field:ident),+ $(,)?]) => {
@@ -52,6 +53,20 @@ macro_rules! soa_queue {
         impl QueueBytes for $queue {
             fn bytes(&self) -> usize {
                 0 $(+ vec_bytes(&self.$field))+
+            }
+        }
+
+        impl Segment for $queue {
+            fn is_empty(&self) -> bool {
+                $queue::is_empty(self)
+            }
+
+            fn clear(&mut self) {
+                $queue::clear(self)
+            }
+
+            fn len(&self) -> usize {
+                $queue::len(self)
             }
         }
     };
@@ -139,6 +154,18 @@ impl RayQueue {
     /// Replaces the queue's rays with `item(0)`, ..., `item(count - 1)`,
     /// made in parallel chunks of [`CHUNK`] rays, each written in place.
     pub fn fill_with(&mut self, count: usize, item: impl Fn(usize) -> RayItem + Sync) {
+        self.fill_chunks(count, |range| range.map(&item));
+    }
+
+    /// Replaces the queue's rays with `count` rays made in parallel chunks
+    /// of [`CHUNK`] rays, each written in place: `items(range)` gives the
+    /// rays of the indices `range` in order (at least `range.len()` of
+    /// them).
+    pub fn fill_chunks<I: Iterator<Item = RayItem>>(
+        &mut self,
+        count: usize,
+        items: impl Fn(std::ops::Range<usize>) -> I + Sync,
+    ) {
         // Every slot is written below: resizing fills only the new ones.
         self.origin.resize(count, Vec3A::ZERO);
         self.direction.resize(count, Vec3A::ZERO);
@@ -160,8 +187,10 @@ impl RayQueue {
             .enumerate()
             .for_each(
                 |(c, (origin, direction, throughput, path, depth, pdf, cone))| {
+                    let start = c * CHUNK;
+                    let mut items = items(start..start + origin.len());
                     for k in 0..origin.len() {
-                        let it = item(c * CHUNK + k);
+                        let it = items.next().expect("a ray per index");
                         debug_assert!(
                             it.ray.origin.is_finite() && it.ray.direction.is_finite(),
                             "non-finite ray: {it:?}"
@@ -358,59 +387,90 @@ soa_queue!(
     [origin, direction, t_max, radiance, path]
 );
 
-/// Shadow rays kept as the per-chunk segments that produced them, in
-/// chunk order: a shading chunk hands its whole buffer over
-/// ([`ShadowSegments::take`]) instead of copying it into one long queue,
-/// and gets an empty, already allocated buffer back. Tracing reads the
-/// segments in order, so results do not depend on the thread count.
+/// Radiance that shadow rays brought back (unblocked, or through media
+/// with their transmittance), for their paths: what a stage that traced
+/// its own shadow rays hands on, in queue order, to be added after every
+/// shading stage of the bounce (the order in which each path's terms are
+/// summed).
 #[derive(Clone, Debug, Default)]
-pub struct ShadowSegments {
-    segments: Vec<ShadowQueue>,
+pub struct LitQueue {
+    /// Path indices.
+    pub path: Vec<u32>,
+    /// Radiance to add, throughput included.
+    pub radiance: Vec<Color>,
+}
+
+impl LitQueue {
+    /// Appends radiance `l` for path `path`.
+    #[inline(always)]
+    pub fn push(&mut self, path: u32, l: Color) {
+        self.path.push(path);
+        self.radiance.push(l);
+    }
+}
+
+soa_queue!(LitQueue, "contributions", path, [path, radiance]);
+
+/// A queue a shading chunk hands over whole ([`Segments::take`]).
+pub trait Segment: Default + QueueBytes {
+    /// True when nothing is queued.
+    fn is_empty(&self) -> bool;
+    /// Removes everything, keeping the allocation.
+    fn clear(&mut self);
+    /// Number of items.
+    fn len(&self) -> usize;
+}
+
+/// A queue kept as the per-chunk segments that filled it, in chunk
+/// order: a shading chunk hands its whole buffer over
+/// ([`Segments::take`]) instead of copying it into one long queue, and
+/// gets an empty, already allocated buffer back. Readers go through the
+/// segments in order, so results do not depend on the thread count.
+#[derive(Clone, Debug)]
+pub struct Segments<Q> {
+    segments: Vec<Q>,
     used: usize,
 }
 
-impl ShadowSegments {
-    /// Appends the rays of `q` as the next segment, leaving in `q` an
+impl<Q> Default for Segments<Q> {
+    fn default() -> Self {
+        Self {
+            segments: Vec::new(),
+            used: 0,
+        }
+    }
+}
+
+impl<Q: Segment> Segments<Q> {
+    /// Appends the items of `q` as the next segment, leaving in `q` an
     /// empty buffer (one of this queue's spares) for reuse.
-    pub fn take(&mut self, q: &mut ShadowQueue) {
+    pub fn take(&mut self, q: &mut Q) {
         if q.is_empty() {
             return;
         }
         if self.used == self.segments.len() {
-            self.segments.push(ShadowQueue::default());
+            self.segments.push(Q::default());
         }
         std::mem::swap(&mut self.segments[self.used], q);
         self.used += 1;
     }
 
-    /// Appends a copy of every shadow ray of `q`, in order.
-    pub fn append(&mut self, q: &ShadowQueue) {
-        if q.is_empty() {
-            return;
-        }
-        if self.used == self.segments.len() {
-            self.segments.push(ShadowQueue::default());
-        }
-        self.segments[self.used].append(q);
-        self.used += 1;
-    }
-
     /// The segments in order.
-    pub fn segments(&self) -> &[ShadowQueue] {
+    pub fn segments(&self) -> &[Q] {
         &self.segments[..self.used]
     }
 
-    /// Total number of shadow rays.
+    /// Total number of items.
     pub fn len(&self) -> usize {
         self.segments().iter().map(|s| s.len()).sum()
     }
 
-    /// True when no shadow ray is queued.
+    /// True when nothing is queued.
     pub fn is_empty(&self) -> bool {
         self.used == 0
     }
 
-    /// Removes every ray, keeping the buffers.
+    /// Removes every item, keeping the buffers.
     pub fn clear(&mut self) {
         for s in &mut self.segments[..self.used] {
             s.clear();
@@ -419,11 +479,15 @@ impl ShadowSegments {
     }
 }
 
-impl QueueBytes for ShadowSegments {
+impl<Q: QueueBytes> QueueBytes for Segments<Q> {
     fn bytes(&self) -> usize {
         self.segments.iter().map(|s| s.bytes()).sum()
     }
 }
+
+/// The radiance of a bounce's unblocked shadow rays, as the chunks that
+/// traced them handed it over, in chunk order.
+pub type ShadowSegments = Segments<LitQueue>;
 
 #[cfg(test)]
 mod tests {

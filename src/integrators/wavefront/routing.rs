@@ -16,11 +16,12 @@
 //! [`drain`](crate::integrators::wavefront::drain)); [`join_shade_outputs`]
 //! appends them to the stage's output in chunk order.
 
-use crate::core::math::Color;
+use crate::accel::packet::{LANES, LaneMask};
+use crate::core::math::{Color, Ray};
 use crate::integrators::counters::RayCounts;
 use crate::integrators::wavefront::queues::{
-    EscapedQueue, HitItem, HitQueue, QueueBytes, RayItem, RayQueue, ShadowItem, ShadowQueue,
-    ShadowSegments,
+    EscapedQueue, HitItem, HitQueue, LitQueue, QueueBytes, RayItem, RayQueue, ShadowItem,
+    ShadowQueue, ShadowSegments,
 };
 use crate::scene::Hit;
 use crate::scene::material::MaterialClass;
@@ -60,7 +61,19 @@ pub fn route_rays(
 #[derive(Default, Debug)]
 pub struct ShadeOutput {
     emitted: Vec<(u32, Color)>,
+    /// Shadow rays of the group of hits being shaded, until
+    /// [`ShadeOutput::trace_shadows`] or
+    /// [`ShadeOutput::trace_shadows_through`] traces them.
     shadows: ShadowQueue,
+    /// Where each hit's shadow rays end in `shadows`, for the group of
+    /// hits being shaded.
+    hit_ends: Vec<u32>,
+    /// Radiance brought back by the shadow rays traced so far.
+    lit: LitQueue,
+    /// Scratch of [`ShadeOutput::trace_shadows`]: the order rays are
+    /// traced in, and which are unblocked.
+    order: Vec<u32>,
+    visible: Vec<bool>,
     reflections: RayQueue,
     refractions: RayQueue,
     counts: RayCounts,
@@ -71,9 +84,86 @@ impl ShadeOutput {
     pub fn clear(&mut self) {
         self.emitted.clear();
         self.shadows.clear();
+        self.hit_ends.clear();
+        self.lit.clear();
         self.reflections.clear();
         self.refractions.clear();
         self.counts = RayCounts::default();
+    }
+
+    /// Marks the end of one hit's shadow rays in the group of hits whose
+    /// rays [`ShadeOutput::trace_shadows`] traces next.
+    #[inline]
+    pub fn end_hit(&mut self) {
+        self.hit_ends.push(self.shadows.len() as u32);
+    }
+
+    /// Traces the shadow rays of the group of hits shaded since the last
+    /// call (each hit closed by [`ShadeOutput::end_hit`]) and keeps the
+    /// radiance of the unblocked ones, in queue order, for the shadow
+    /// stage to add. The rays are traced in groups of up to [`LANES`]
+    /// taken across the hits: every hit's first ray, then every hit's
+    /// second ray, and so on, so that a group holds the rays of
+    /// neighbouring hits towards one light (the first light that can
+    /// light them, the second...), which point alike; `occluded` returns
+    /// the mask of the blocked rays of a group.
+    pub fn trace_shadows(&mut self, occluded: impl Fn(&[Ray], &[f32]) -> LaneMask) {
+        let n = self.shadows.len();
+        if n == 0 {
+            self.hit_ends.clear();
+            return;
+        }
+        self.order.clear();
+        for slot in 0.. {
+            let before = self.order.len();
+            let mut start = 0;
+            for &end in &self.hit_ends {
+                if start + slot < end {
+                    self.order.push(start + slot);
+                }
+                start = end;
+            }
+            if self.order.len() == before {
+                break;
+            }
+        }
+        debug_assert_eq!(self.order.len(), n);
+        self.visible.clear();
+        self.visible.resize(n, false);
+        let q = &self.shadows;
+        for group in self.order.chunks(LANES) {
+            let m = group.len();
+            let rays: [Ray; LANES] = std::array::from_fn(|l| q.ray(group[l.min(m - 1)] as usize));
+            let t_max: [f32; LANES] =
+                std::array::from_fn(|l| q.t_max[group[l.min(m - 1)] as usize]);
+            let blocked = occluded(&rays[..m], &t_max[..m]);
+            for (l, &j) in group.iter().enumerate() {
+                self.visible[j as usize] = blocked & (1 << l) == 0;
+            }
+        }
+        for (j, &v) in self.visible.iter().enumerate() {
+            if v {
+                self.lit.push(q.path[j], q.radiance[j]);
+            }
+        }
+        self.shadows.clear();
+        self.hit_ends.clear();
+    }
+
+    /// Traces the shadow rays pushed since the last call one at a time,
+    /// in order, through the media they cross: `transmittance` gives each
+    /// ray's, and the radiance of the rays that bring any back is kept for
+    /// the shadow stage to add.
+    pub fn trace_shadows_through(&mut self, transmittance: impl Fn(&Ray, f32) -> Color) {
+        let q = &self.shadows;
+        for j in 0..q.len() {
+            let t = transmittance(&q.ray(j), q.t_max[j]);
+            if t != Color::ZERO {
+                self.lit.push(q.path[j], q.radiance[j] * t);
+            }
+        }
+        self.shadows.clear();
+        self.hit_ends.clear();
     }
 
     /// Adds `radiance` to path `path`.
@@ -143,6 +233,9 @@ impl ShadeOutput {
     pub fn bytes(&self) -> usize {
         self.emitted.capacity() * std::mem::size_of::<(u32, Color)>()
             + self.shadows.bytes()
+            + self.lit.bytes()
+            + (self.hit_ends.capacity() + self.order.capacity()) * std::mem::size_of::<u32>()
+            + self.visible.capacity()
             + self.reflections.bytes()
             + self.refractions.bytes()
     }
@@ -174,7 +267,8 @@ pub fn join_shade_outputs<T: std::borrow::BorrowMut<ShadeOutput>>(
         for &(path, l) in &out.emitted {
             to.radiance[path as usize] += l;
         }
-        to.shadows.take(&mut out.shadows);
+        debug_assert!(out.shadows.is_empty(), "shadow rays left untraced");
+        to.shadows.take(&mut out.lit);
         to.next.append(&out.reflections);
         to.rays.add(&out.counts);
     }
@@ -214,6 +308,92 @@ mod tests {
             instance: 0,
             material,
         }
+    }
+
+    /// A chunk that traces its own shadow rays traces every ray of the
+    /// group exactly once, in groups of at most `LANES` that take the
+    /// hits' first rays, then their second rays, and so on, and passes on
+    /// the radiance of the unblocked rays in queue order (hit by hit,
+    /// each hit's rays in the order pushed), whatever order they were
+    /// traced in: the order each path's radiance is summed in.
+    #[test]
+    fn shadow_rays_traced_by_slot_are_passed_on_in_queue_order() {
+        use std::cell::RefCell;
+
+        // Hit h pushes counts[h] rays; ray k of hit h is keyed 100 h + k
+        // (in its origin's x, its path and its radiance).
+        let counts = [2usize, 0, 3, 1, 12, 2, 1, 1, 1, 3];
+        let mut out = ShadeOutput::default();
+        for (h, &n) in counts.iter().enumerate() {
+            for k in 0..n {
+                let key = (100 * h + k) as u32;
+                let q = ShadowQuery {
+                    ray: Ray::new(Vec3A::new(key as f32, 0.0, 0.0), Vec3A::Y),
+                    t_max: 1.0,
+                    radiance: Color::splat(key as f32),
+                };
+                out.push_shadow_from(key, Color::ONE, q);
+            }
+            out.end_hit();
+        }
+        let groups = RefCell::new(Vec::new());
+        // Rays with an odd key are blocked.
+        out.trace_shadows(|rays, t_max| {
+            assert_eq!(rays.len(), t_max.len());
+            let keys: Vec<u32> = rays.iter().map(|r| r.origin.x as u32).collect();
+            let blocked = keys
+                .iter()
+                .enumerate()
+                .filter(|(_, k)| *k % 2 == 1)
+                .fold(0, |m, (l, _)| m | 1 << l);
+            groups.borrow_mut().push(keys);
+            blocked
+        });
+        // By slot: every hit's first ray, then every hit's second ...
+        let by_slot: Vec<u32> = (0..12)
+            .flat_map(|k| {
+                counts
+                    .iter()
+                    .enumerate()
+                    .filter(move |(_, n)| k < **n)
+                    .map(move |(h, _)| (100 * h + k) as u32)
+            })
+            .collect();
+        let groups = groups.into_inner();
+        assert!(groups.iter().all(|g| !g.is_empty() && g.len() <= LANES));
+        assert_eq!(groups.concat(), by_slot);
+        assert_eq!(
+            groups[0].len(),
+            LANES,
+            "the hits' first rays share a packet"
+        );
+        // Passed on: the even keys, in queue order.
+        let in_queue_order: Vec<u32> = counts
+            .iter()
+            .enumerate()
+            .flat_map(|(h, &n)| (0..n).map(move |k| (100 * h + k) as u32))
+            .filter(|k| k % 2 == 0)
+            .collect();
+        assert_eq!(out.lit.path, in_queue_order);
+        let radiance: Vec<u32> = out.lit.radiance.iter().map(|c| c.x as u32).collect();
+        assert_eq!(radiance, in_queue_order);
+        assert!(out.shadows.is_empty() && out.hit_ends.is_empty());
+        // Handed over whole at the join, after the emission.
+        let mut radiance = vec![Color::ZERO; 1300];
+        let mut shadows = ShadowSegments::default();
+        let mut next = RayQueue::default();
+        let mut rays = RayCounts::default();
+        join_shade_outputs(
+            std::slice::from_mut(&mut out),
+            ShadeTargets {
+                radiance: &mut radiance,
+                shadows: &mut shadows,
+                next: &mut next,
+                rays: &mut rays,
+            },
+        );
+        assert_eq!(shadows.len(), in_queue_order.len());
+        assert_eq!(rays.shadow, counts.iter().sum::<usize>() as u64);
     }
 
     /// Every ray goes to exactly one queue: misses to the escaped queue,

@@ -8,15 +8,15 @@
 
 use rayon::prelude::*;
 
-use crate::accel::packet::LANES;
+use crate::accel::packet::{LANES, LaneMask};
 use crate::core::math::{Color, Ray, RayCone, max_component};
-use crate::core::rng::{Sampler, SamplerSeed};
+use crate::core::rng::SamplerSeed;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
 use crate::integrators::counters::{RayCounts, RenderCounters};
 use crate::integrators::wavefront::CHUNK;
-use crate::integrators::wavefront::drain::{chunk_ranges, drain_chunks, drain_queue};
+use crate::integrators::wavefront::drain::drain_queue;
 use crate::integrators::wavefront::queues::{
     ClosestHits, EscapedQueue, HitItem, HitQueue, RayItem, RayQueue, ShadowSegments,
 };
@@ -58,6 +58,9 @@ pub fn generate_camera_rays(
             k.sample,
         )
     };
+    // Each chunk walks its consecutive paths' keys (`PathMap::paths_from`)
+    // instead of dividing each path index out.
+    let keys = |start: usize| paths.paths_from(first + start as u64);
     // Path transport draws numbers at every bounce: each path's sampler
     // keys are hashed once here, for the shading stages to start from.
     if settings.transport != Transport::Path {
@@ -65,22 +68,27 @@ pub fn generate_camera_rays(
     } else {
         seeds.resize(count, SamplerSeed::default());
         seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
-            for (k, s) in s.iter_mut().enumerate() {
-                *s = seed(&paths.path(first + (c * CHUNK + k) as u64));
+            for (s, k) in s.iter_mut().zip(keys(c * CHUNK)) {
+                *s = seed(&k);
             }
         });
     }
-    out.fill_with(count, |local| {
-        let k = paths.path(first + local as u64);
-        let mut sampler = seed(&k).sampler();
-        RayItem {
-            ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
-            throughput: Color::ONE,
-            path: local as u32,
-            depth: 0,
-            pdf: 0.0,
-            cone: camera.cone(),
-        }
+    let seeds: &[SamplerSeed] = seeds;
+    out.fill_chunks(count, |range| {
+        keys(range.start).zip(range).map(|(k, local)| {
+            let mut sampler = match seeds.get(local) {
+                Some(s) => s.sampler(),
+                None => seed(&k).sampler(),
+            };
+            RayItem {
+                ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
+                throughput: Color::ONE,
+                path: local as u32,
+                depth: 0,
+                pdf: 0.0,
+                cone: camera.cone(),
+            }
+        })
     });
     rays.camera += count as u64;
 }
@@ -232,14 +240,13 @@ pub struct MediaTargets<'a> {
 /// (its ray, weighted throughput and end) and routed by index to its
 /// class's hit queue or to the escaped queue; a scattering event adds its
 /// next-event shadow rays ([`volume::medium_next_event`]) and its next
-/// ray ([`volume::continue_in_medium`]). `first` is the batch's first
-/// path.
+/// ray ([`volume::continue_in_medium`]). `seeds` holds each path's
+/// sampler seed ([`generate_camera_rays`]).
 #[allow(clippy::too_many_arguments)]
 pub fn sample_media(
     scene: &RenderScene,
     settings: &RenderSettings,
-    paths: &PathMap,
-    first: u64,
+    seeds: &[SamplerSeed],
     classes: &[MaterialClass],
     rays: &mut RayQueue,
     found: &mut ClosestHits,
@@ -254,8 +261,7 @@ pub fn sample_media(
         shaded.clear();
         for i in range {
             let item = rays_in.get(i);
-            let (pixel, sample) = paths.sampler_keys(first + item.path as u64);
-            let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, sample);
+            let mut sampler = seeds[item.path as usize].sampler();
             let seg = volume::propagate(
                 scene,
                 &item.ray,
@@ -286,6 +292,9 @@ pub fn sample_media(
                 SegmentEnd::Scattered(v) => {
                     volume::medium_next_event(scene, settings, &v, &mut sampler, item.depth, |q| {
                         shaded.push_shadow_from(item.path, throughput, q)
+                    });
+                    shaded.trace_shadows_through(|r, t_max| {
+                        volume::shadow_transmittance(scene, r, t_max)
                     });
                     if let Some(c) = volume::continue_in_medium(
                         settings,
@@ -390,9 +399,24 @@ pub struct ShadeInput<'a> {
     pub wavelengths: &'a [f32],
 }
 
+/// Hits whose shadow rays a shading chunk traces together (see
+/// [`ShadeOutput::trace_shadows`]): enough for full packets of rays of
+/// neighbouring hits towards each light, few enough that the group's rays
+/// stay in the core's cache (48 lights: 1,536 rays, 80 kB).
+pub const SHADOW_GROUP: usize = 4 * LANES;
+
 /// Runs `kernel` on every hit of `input.hits` with its interaction, in
 /// parallel chunks each writing its own [`ShadeOutput`], then joins the
 /// outputs in chunk order.
+///
+/// Each chunk traces the shadow rays its hits pushed itself,
+/// [`SHADOW_GROUP`] hits at a time, while the rays are still in the
+/// core's cache, and passes on only the radiance they bring back (see
+/// [`trace_shadow_rays`]): queueing every ray for a stage of its own cost
+/// the stores and loads of 52 bytes per ray, most of the work on scenes
+/// of many lights. In a scene with media under path transport each ray is
+/// followed through the media it crosses and carries its transmittance
+/// ([`volume::shadow_transmittance`]).
 fn shade_hits(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -404,34 +428,65 @@ fn shade_hits(
     let ShadeInput {
         rays, found, hits, ..
     } = input;
+    let through_media = scene.has_media() && settings.transport == Transport::Path;
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
-        for &i in &hits.ray[range] {
-            let i = i as usize;
-            let Some(hit) = &found.0[i] else {
-                debug_assert!(false, "ray {i} is queued for shading without a hit");
-                continue;
-            };
-            let mut h = HitItem::new(hit, &rays.get(i));
-            let it =
-                Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
-            // A segment that ran through an absorbing interior carries its
-            // transmittance to everything seen at its end. In a scene with
-            // media, path transport has weighed the segment in
-            // `sample_media`, and Whitted transport attenuates it by its
-            // medium's extinction.
-            let tr = if scene.has_media() {
-                whitted_media_transmittance(scene, settings, &h)
-            } else {
-                interior_transmittance(&it, h.distance)
-            };
-            if let Some(tr) = tr {
-                h.throughput *= tr;
+        for group in hits.ray[range].chunks(SHADOW_GROUP) {
+            for &i in group {
+                let i = i as usize;
+                let Some(hit) = &found.0[i] else {
+                    debug_assert!(false, "ray {i} is queued for shading without a hit");
+                    continue;
+                };
+                let mut h = HitItem::new(hit, &rays.get(i));
+                let it = Interaction::with_cone(
+                    scene,
+                    &Ray::new(h.point, h.direction),
+                    &h.hit(),
+                    h.cone,
+                );
+                // A segment that ran through an absorbing interior carries
+                // its transmittance to everything seen at its end. In a
+                // scene with media, path transport has weighed the segment
+                // in `sample_media`, and Whitted transport attenuates it by
+                // its medium's extinction.
+                let tr = if scene.has_media() {
+                    whitted_media_transmittance(scene, settings, &h)
+                } else {
+                    interior_transmittance(&it, h.distance)
+                };
+                if let Some(tr) = tr {
+                    h.throughput *= tr;
+                }
+                kernel(&h, &it, out);
+                out.end_hit();
             }
-            kernel(&h, &it, out);
+            if through_media {
+                out.trace_shadows_through(|r, t_max| volume::shadow_transmittance(scene, r, t_max));
+            } else {
+                out.trace_shadows(|rays, t_max| occluded_group(scene, rays, t_max));
+            }
         }
     });
     join_shade_outputs(outputs, to);
+}
+
+/// The mask of the blocked rays among up to [`LANES`] shadow rays: through
+/// the top level as one packet when they point into one octant (each lane
+/// then traverses meshes alone), else one at a time, which costs rays
+/// pointing apart fewer instructions.
+#[inline]
+fn occluded_group(scene: &RenderScene, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+    if rays.len() > 1 && one_octant(rays) {
+        return scene.occluded_packet_with(rays, t_max, false);
+    }
+    let mut blocked = 0;
+    for (l, (r, &t)) in rays.iter().zip(t_max).enumerate() {
+        if scene.occluded(r, 0.0, t) {
+            blocked |= 1 << l;
+        }
+    }
+    blocked
 }
 
 /// The attenuation of hit `h`'s segment in a scene with media: by its
@@ -620,131 +675,21 @@ pub fn shade_class(
     f(scene, settings, input, scratch, to)
 }
 
-/// Reusable buffers of [`trace_shadow_rays`].
-#[derive(Clone, Debug, Default)]
-pub struct ShadowScratch {
-    /// Each work chunk's segment and ray range, in queue order.
-    work: Vec<(usize, std::ops::Range<usize>)>,
-    /// Each work chunk's visibility flags.
-    visible: Vec<Vec<bool>>,
-    /// Each work chunk's transmittances (scenes with media).
-    transmitted: Vec<Vec<Color>>,
-}
-
-impl ShadowScratch {
-    /// Bytes allocated.
-    pub fn bytes(&self) -> usize {
-        self.work.capacity() * std::mem::size_of::<(usize, std::ops::Range<usize>)>()
-            + self.visible.iter().map(|v| v.capacity()).sum::<usize>()
-            + self
-                .transmitted
-                .iter()
-                .map(|v| v.capacity() * std::mem::size_of::<Color>())
-                .sum::<usize>()
-    }
-}
-
-/// Stage: traces every shadow ray, stopping at the first blocker, and adds
-/// the radiance of the unblocked ones to their paths, in queue order.
+/// Stage: adds the radiance the bounce's shadow rays brought back to
+/// their paths, in queue order (media first, then shading stage by
+/// shading stage, chunk by chunk), after every shading stage has added
+/// its emission: the order in which each path's terms are summed.
 ///
-/// Eight consecutive shadow rays that point into one octant (the rays of
-/// neighbouring camera hits, or of one pixel's samples, to one light) go
-/// through the top level as a packet, and each lane traverses meshes
-/// alone: whole packets, also with rays binned by light, were measured
-/// slower than single rays, because the single-ray node test is SIMD
-/// across a node's eight children already. Eight rays pointing apart (a
-/// deeper bounce's scattered hits, or one hit's rays to lights all around)
-/// are traced one at a time, which costs them fewer instructions than a
-/// packet (callgrind, 16 spp: 1-2% of the whole wavefront on the Cornell
-/// boxes, `glass_mirror` and `many_lights`).
-///
-/// In a scene with media under path transport (`through_media`) each
-/// shadow ray is followed one at a time through the media and boundaries
-/// it crosses, and carries its transmittance
-/// ([`volume::shadow_transmittance`]).
-pub fn trace_shadow_rays(
-    scene: &RenderScene,
-    shadows: &ShadowSegments,
-    scratch: &mut ShadowScratch,
-    radiance: &mut [Color],
-    through_media: bool,
-) {
-    if through_media {
-        trace_shadow_rays_through_media(scene, shadows, scratch, radiance);
-        return;
-    }
-    let ShadowScratch { work, visible, .. } = scratch;
-    // Work chunks of at most CHUNK rays, each within one segment.
-    work.clear();
-    for (s, seg) in shadows.segments().iter().enumerate() {
-        work.extend(chunk_ranges(seg.len()).map(|range| (s, range)));
-    }
-    let work = &*work;
-    let flags = drain_chunks(work.len(), visible, |c, flags| {
-        let (s, range) = &work[c];
-        let seg = &shadows.segments()[*s];
-        flags.resize(range.len(), false);
-        for (k, lanes) in flags.chunks_mut(LANES).enumerate() {
-            let j = range.start + k * LANES;
-            let m = lanes.len();
-            let rays: [Ray; LANES] = std::array::from_fn(|l| seg.ray(j + l.min(m - 1)));
-            if !one_octant(&rays[..m]) {
-                for ((v, r), &t_max) in lanes.iter_mut().zip(&rays[..m]).zip(&seg.t_max[j..]) {
-                    *v = !scene.occluded(r, 0.0, t_max);
-                }
-                continue;
-            }
-            let blocked = scene.occluded_packet_with(&rays[..m], &seg.t_max[j..j + m], false);
-            for (l, v) in lanes.iter_mut().enumerate() {
-                *v = blocked & (1 << l) == 0;
-            }
-        }
-    });
-    for ((s, range), flags) in work.iter().zip(flags.iter()) {
-        let seg = &shadows.segments()[*s];
-        let rays = seg.path[range.clone()]
-            .iter()
-            .zip(&seg.radiance[range.clone()]);
-        for ((&path, l), &visible) in rays.zip(flags) {
-            if visible {
-                radiance[path as usize] += *l;
-            }
-        }
-    }
-}
-
-/// [`trace_shadow_rays`] in a scene with media: each ray's transmittance,
-/// computed in parallel chunks, added to its path in queue order.
-fn trace_shadow_rays_through_media(
-    scene: &RenderScene,
-    shadows: &ShadowSegments,
-    scratch: &mut ShadowScratch,
-    radiance: &mut [Color],
-) {
-    let ShadowScratch {
-        work, transmitted, ..
-    } = scratch;
-    work.clear();
-    for (s, seg) in shadows.segments().iter().enumerate() {
-        work.extend(chunk_ranges(seg.len()).map(|range| (s, range)));
-    }
-    let work = &*work;
-    let out = drain_chunks(work.len(), transmitted, |c, out| {
-        let (s, range) = &work[c];
-        let seg = &shadows.segments()[*s];
-        out.clear();
-        out.extend(
-            range
-                .clone()
-                .map(|j| volume::shadow_transmittance(scene, &seg.ray(j), seg.t_max[j])),
-        );
-    });
-    for ((s, range), tr) in work.iter().zip(out.iter()) {
-        let seg = &shadows.segments()[*s];
-        for (j, &t) in range.clone().zip(tr) {
-            if t != Color::ZERO {
-                radiance[seg.path[j] as usize] += seg.radiance[j] * t;
-            }
+/// The rays themselves were traced by the stages that made them, chunk
+/// by chunk, while they were still in the core's cache
+/// ([`ShadeOutput::trace_shadows`]: groups of the rays of neighbouring
+/// hits towards one light, through the top level as one packet when
+/// they point into one octant; through media one at a time with their
+/// transmittance, [`ShadeOutput::trace_shadows_through`]).
+pub fn trace_shadow_rays(shadows: &ShadowSegments, radiance: &mut [Color]) {
+    for seg in shadows.segments() {
+        for (&path, l) in seg.path.iter().zip(&seg.radiance) {
+            radiance[path as usize] += *l;
         }
     }
 }
@@ -766,13 +711,23 @@ pub fn update_film(
     counters: &mut RenderCounters,
 ) {
     let pixels = sums.pixels_mut();
+    // Path `first + local` is a sample of window pixel `(first + local) /
+    // n`: the batch's paths run through consecutive pixels, so the pixel
+    // is stepped along instead of divided out per path (this stage holds
+    // the lock on the frame's sums).
     let n = paths.samples() as u64;
+    let mut pixel = (first / n) as usize;
+    let mut left = n - first % n;
     for (local, &l) in radiance.iter().enumerate() {
-        let pixel = ((first + local as u64) / n) as usize;
         let l = match wavelengths.get(local) {
             Some(&w) => path::weigh_wavelength(l, Some(w)),
             None => l,
         };
         accumulate(&mut pixels[pixel], l, counters);
+        left -= 1;
+        if left == 0 {
+            pixel += 1;
+            left = n;
+        }
     }
 }
