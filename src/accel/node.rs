@@ -2,7 +2,10 @@
 //! boxes of a [`Node8`], shared by single-ray ([`crate::accel::single`]),
 //! packet ([`crate::accel::packet`]) and stream ([`crate::accel::stream`])
 //! traversal, so the three can never disagree about which boxes a ray
-//! enters.
+//! enters. (Single rays in mesh BVHs may use [`NodeRay::test_fused`] on
+//! the AVX2 path, whose distances round differently: the boxes it enters
+//! can differ only within rounding, far inside the margin, and the hits
+//! are the same.)
 
 use glam::Vec4;
 
