@@ -2,7 +2,10 @@
 //! boxes of a [`Node8`], shared by single-ray ([`crate::accel::single`]),
 //! packet ([`crate::accel::packet`]) and stream ([`crate::accel::stream`])
 //! traversal, so the three can never disagree about which boxes a ray
-//! enters.
+//! enters. (Single rays in mesh BVHs may use [`NodeRay::test_fused`] on
+//! the AVX2 path, whose distances round differently: the boxes it enters
+//! can differ only within rounding, far inside the margin, and the hits
+//! are the same.)
 
 use glam::Vec4;
 
@@ -72,6 +75,11 @@ pub struct NodeRay {
     pub far: [u8; 3],
     /// Octant of the direction: bit `a` set when axis `a` points down.
     pub octant: u8,
+    /// `o_near * inv` and `o_far * inv`, for [`Self::test_fused`].
+    pub o_inv: [[f32; 3]; 2],
+    /// Whether [`Self::test_fused`] may use the fused form: every `inv`
+    /// finite and no product of a coordinate with it near overflow.
+    pub fused: bool,
 }
 
 impl NodeRay {
@@ -93,25 +101,28 @@ impl NodeRay {
             near: [0; 3],
             far: [0; 3],
             octant: 0,
+            o_inv: [[0.0; 3]; 2],
+            fused: true,
         };
+        let reach = magnitude + o.abs().max_element() + m;
         for a in 0..3 {
             let d = ray.direction[a];
             let inv = 1.0 / d;
             r.inv[a] = inv;
             // The near plane of a grown box is lo - m for rays going up:
             // (lo - m - o) inv = (lo - (o + m)) inv; hi + m going down.
-            if inv.is_sign_negative() {
-                r.near[a] = 3 + a as u8;
-                r.far[a] = a as u8;
-                r.o_near[a] = o[a] - m;
-                r.o_far[a] = o[a] + m;
-                r.octant |= 1 << a;
-            } else {
-                r.near[a] = a as u8;
-                r.far[a] = 3 + a as u8;
-                r.o_near[a] = o[a] + m;
-                r.o_far[a] = o[a] - m;
-            }
+            // Chosen without branches (incoherent rays would mispredict
+            // them); `o + (-m)` is `o - m` bit for bit.
+            let down = inv.is_sign_negative();
+            let shift = m.copysign(inv);
+            r.near[a] = a as u8 + 3 * down as u8;
+            r.far[a] = a as u8 + 3 * !down as u8;
+            r.o_near[a] = o[a] + shift;
+            r.o_far[a] = o[a] - shift;
+            r.octant |= (down as u8) << a;
+            r.o_inv[0][a] = r.o_near[a] * inv;
+            r.o_inv[1][a] = r.o_far[a] * inv;
+            r.fused &= inv.abs() * reach < 1.0e30;
         }
         r
     }
@@ -137,6 +148,64 @@ impl NodeRay {
             return unsafe { self.test_avx2(node, t_min, t_max) };
         }
         self.test_portable(node, t_min, t_max)
+    }
+
+    /// [`Self::test`] with each slab distance computed as one fused
+    /// multiply-add, `plane * inv - o * inv`, on the AVX2 path (where the
+    /// ray allows it, see [`Self::fused`]); [`Self::test`] otherwise.
+    ///
+    /// The distances differ from [`Self::test`]'s by rounding only: the
+    /// product `o * inv` rounds by half an ulp of `|o| / |d|` and the
+    /// fused result by half an ulp of `t`, together far less than the
+    /// margin's 16 EPS of `|o|` and the tree's magnitude over `|d|`. So
+    /// the test stays conservative and a closest-hit query whose result
+    /// does not depend on the order of its leaves (mesh BVHs: equal `t`
+    /// goes to the lowest triangle index) gets the same hits; boxes within
+    /// rounding of the ray's interval may be entered or not, and entries
+    /// within rounding of each other may swap.
+    #[inline(always)]
+    pub fn test_fused<const AVX: bool>(
+        &self,
+        node: &Node8,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX && self.fused {
+            // SAFETY: `AVX` is set only by the AVX2 entry points, which run
+            // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
+            #[allow(unsafe_code)]
+            return unsafe { self.test_fma(node, t_min, t_max) };
+        }
+        self.test::<AVX>(node, t_min, t_max)
+    }
+
+    /// [`Self::test_fused`]'s fused form in one 8-wide AVX register.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 and FMA, inlined into an AVX2 entry point
+    /// (as [`Self::test_avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn test_fma(&self, node: &Node8, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+        unsafe {
+            use std::arch::x86_64::*;
+            let mut enter = _mm256_set1_ps(t_min);
+            let mut exit = _mm256_set1_ps(t_max);
+            for a in 0..3 {
+                let near: __m256 = bytemuck::cast(node.planes[self.near[a] as usize]);
+                let far: __m256 = bytemuck::cast(node.planes[self.far[a] as usize]);
+                let inv = _mm256_set1_ps(self.inv[a]);
+                let tn = _mm256_fmsub_ps(near, inv, _mm256_set1_ps(self.o_inv[0][a]));
+                let tf = _mm256_fmsub_ps(far, inv, _mm256_set1_ps(self.o_inv[1][a]));
+                enter = _mm256_max_ps(tn, enter);
+                exit = _mm256_min_ps(tf, exit);
+            }
+            let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
+            (mask, bytemuck::cast(enter))
+        }
     }
 
     /// [`Self::test`] in two 4-wide halves (SSE2 on x86-64).

@@ -22,7 +22,11 @@
 //! Both paths perform the same IEEE operations in the same order (Rust
 //! never fuses a multiply and an add on its own, and the kernels use no
 //! fused operations), so they give bit-identical hits; the tests check
-//! it.
+//! it. The one exception is the node test of single rays in mesh BVHs
+//! ([`crate::accel::node::NodeRay::test_fused`]): there the AVX2 path
+//! computes slab distances with one fused multiply-add, which changes
+//! their rounding but not the hits (the test stays conservative and a
+//! mesh's closest hit does not depend on the order of its leaves).
 
 use std::sync::atomic::{AtomicU8, Ordering};
 

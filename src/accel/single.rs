@@ -105,16 +105,18 @@ pub fn traverse_from<const AVX: bool>(
     any_hit: bool,
     visit: impl FnMut(u32, f32) -> Option<f32>,
 ) -> bool {
-    traverse_from_with::<AVX>(bvh, start, ray, t_min, t_max, any_hit, visit, |_| {})
+    traverse_from_with::<AVX, false>(bvh, start, ray, t_min, t_max, any_hit, visit, |_| {})
 }
 
 /// [`traverse_from`] with `prefetch_leaf(leaf)`, called for a leaf that
 /// will be visited soon (it was entered beside a sibling), to start
 /// loading what its visit reads. Nodes entered beside a sibling are
-/// prefetched the same way.
+/// prefetched the same way. With `FUSED` the nodes are tested with
+/// [`NodeRay::test_fused`]: only for queries whose hits do not depend on
+/// the order in which leaves are visited.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub fn traverse_from_with<const AVX: bool>(
+pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     bvh: &Bvh8,
     start: u32,
     ray: &NodeRay,
@@ -143,7 +145,11 @@ pub fn traverse_from_with<const AVX: bool>(
     loop {
         if cur & LEAF == 0 {
             let node = &bvh.nodes[cur as usize];
-            let (mask, enter) = ray.test::<AVX>(node, t_min, t_max);
+            let (mask, enter) = if FUSED {
+                ray.test_fused::<AVX>(node, t_min, t_max)
+            } else {
+                ray.test::<AVX>(node, t_min, t_max)
+            };
             if mask != 0 {
                 let first = mask.trailing_zeros() as usize;
                 let rest = mask & (mask - 1);
@@ -258,7 +264,10 @@ pub fn traverse<const AVX: bool>(
     traverse_from::<AVX>(bvh, 0, &node_ray, t_min, t_max, any_hit, visit)
 }
 
-/// [`traverse`] with [`traverse_from_with`]'s leaf prefetch.
+/// [`traverse`] with [`traverse_from_with`]'s leaf prefetch, and nodes
+/// tested with [`NodeRay::test_fused`]: for mesh BVHs, whose closest hit
+/// does not depend on the order of the leaves (equal `t` goes to the
+/// lowest triangle index) and whose any-hit answer does not either.
 #[inline(always)]
 pub fn traverse_with<const AVX: bool>(
     bvh: &Bvh8,
@@ -270,7 +279,7 @@ pub fn traverse_with<const AVX: bool>(
     prefetch_leaf: impl Fn(u32),
 ) -> bool {
     let node_ray = NodeRay::new(ray, bvh);
-    traverse_from_with::<AVX>(
+    traverse_from_with::<AVX, true>(
         bvh,
         0,
         &node_ray,

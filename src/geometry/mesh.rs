@@ -348,10 +348,12 @@ impl Mesh {
         t_min: f32,
         t_max: f32,
     ) -> Option<MeshHit> {
+        // The count from the small leaf array (`lo.count + hi.count`, which
+        // sit at the blocks' ends): known before the blocks arrive.
+        let count = self.bvh.leaves[leaf as usize].count;
         let lo = &self.blocks[2 * leaf as usize];
         let hi = &self.blocks[2 * leaf as usize + 1];
-        let (lane, t, b1, b2) =
-            wt.intersect8::<AVX>([lo, hi], lo.count + hi.count, t_min, t_max)?;
+        let (lane, t, b1, b2) = wt.intersect8::<AVX>([lo, hi], count, t_min, t_max)?;
         Some(MeshHit {
             t,
             triangle: lo.first + lane,

@@ -15,6 +15,9 @@ pub struct WatertightRay {
     direction: Vec3A,
     k: [usize; 3],
     shear: Vec3A,
+    /// The origin's coordinates in the order `k` (read by the leaf tests
+    /// without indexing a vector by a run-time axis).
+    o_k: [f32; 3],
 }
 
 impl WatertightRay {
@@ -23,23 +26,25 @@ impl WatertightRay {
     pub fn new(ray: &Ray) -> Self {
         let d = ray.direction;
         let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        // The axis of largest |d| (x before y before z on ties), the next
+        // two in turn, swapped when d points down that axis: without
+        // branches, which incoherent rays would mispredict.
+        let x_first = a.x > a.y;
+        let is_x = x_first & (a.x > a.z);
+        let is_y = !x_first & (a.y > a.z);
+        let kz = 2 - 2 * is_x as usize - is_y as usize;
+        const NEXT: [usize; 3] = [1, 2, 0];
+        let dk = d.to_array();
+        let (kx, ky) = (NEXT[kz], NEXT[NEXT[kz]]);
+        let swap = (kx ^ ky) & 0usize.wrapping_sub((dk[kz] < 0.0) as usize);
+        let (kx, ky) = (kx ^ swap, ky ^ swap);
+        let o = ray.origin.to_array();
         Self {
             origin: ray.origin,
             direction: d,
             k: [kx, ky, kz],
-            shear: Vec3A::new(d[kx] / d[kz], d[ky] / d[kz], 0.0),
+            shear: Vec3A::new(dk[kx] / dk[kz], dk[ky] / dk[kz], 0.0),
+            o_k: [o[kx], o[ky], o[kz]],
         }
     }
 
@@ -112,10 +117,7 @@ impl WatertightRay {
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let t = self.plane_t(p0, p1, p2);
-        if !(t > t_min && t < t_max) {
-            return None;
-        }
+        let t = self.plane_t_within(p0, p1, p2, t_min, t_max)?;
         let inv = 1.0 / det;
         Some((t, v * inv, w * inv))
     }
@@ -129,12 +131,44 @@ impl WatertightRay {
     /// away was hit 4.5e-4 off its plane (`tests/kernels/watertight.rs`), enough
     /// for secondary rays to self-intersect. In f64 the differences of f32
     /// coordinates and their products are exact, so `t` is correct to f32
-    /// rounding for any triangle. Only called for hits.
-    #[inline]
-    fn plane_t(&self, p0: Vec3A, p1: Vec3A, p2: Vec3A) -> f32 {
+    /// rounding for any triangle. Only called for rays that pass the edge
+    /// test.
+    ///
+    /// Returns `t` when `t_min < t < t_max`, deciding exactly as computing
+    /// `t = (num / den) as f32` and comparing would, but without the
+    /// division when the quotient is negative (with `t_min >= 0`) or
+    /// beyond `t_max`, which is read off `num` and `den`. The rounding
+    /// `q -> (q as f64) as f32` is monotone and keeps `0` and `t_max`
+    /// (an f32): a negative quotient gives `t <= 0`, one beyond `t_max`
+    /// gives `t >= t_max`. Planes crossed behind the origin are common
+    /// (a bounce ray's own triangle, the back faces of its
+    /// neighbourhood); only quotients the test cannot settle are divided.
+    #[inline(always)]
+    fn plane_t_within(
+        &self,
+        p0: Vec3A,
+        p1: Vec3A,
+        p2: Vec3A,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<f32> {
         let p0 = p0.as_dvec3();
         let n = (p1.as_dvec3() - p0).cross(p2.as_dvec3() - p0);
-        (n.dot(p0 - self.origin.as_dvec3()) / n.dot(self.direction.as_dvec3())) as f32
+        let num = n.dot(p0 - self.origin.as_dvec3());
+        let den = n.dot(self.direction.as_dvec3());
+        let negative = (num < 0.0 && den > 0.0) || (num > 0.0 && den < 0.0);
+        if negative && t_min >= 0.0 {
+            return None;
+        }
+        let positive = (num > 0.0 && den > 0.0) || (num < 0.0 && den < 0.0);
+        // |den| t_max, rounded up: the product and the scaling each round
+        // by at most 2^-53 relatively, well inside the factor 1 + 2^-49.
+        // (No overflow: f32 coordinates give |num|, |den| below 2^400.)
+        if positive && num.abs() > den.abs() * t_max as f64 * (1.0 + f64::EPSILON * 8.0) {
+            return None;
+        }
+        let t = (num / den) as f32;
+        (t > t_min && t < t_max).then_some(t)
     }
 
     /// [`Self::intersect`] when some edge function is within its f32
@@ -193,10 +227,7 @@ impl WatertightRay {
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let t = self.plane_t(p[0], p[1], p[2]);
-        if !(t > t_min && t < t_max) {
-            return None;
-        }
+        let t = self.plane_t_within(p[0], p[1], p[2], t_min, t_max)?;
         Some((t, (v / det) as f32, (w / det) as f32))
     }
 }
@@ -349,9 +380,9 @@ impl WatertightRay {
         let sx = Vec4::splat(self.shear.x);
         let sy = Vec4::splat(self.shear.y);
         let (ox, oy, oz) = (
-            Vec4::splat(self.origin[kx]),
-            Vec4::splat(self.origin[ky]),
-            Vec4::splat(self.origin[kz]),
+            Vec4::splat(self.o_k[0]),
+            Vec4::splat(self.o_k[1]),
+            Vec4::splat(self.o_k[2]),
         );
         // Per vertex: sheared x, y; largest |coordinate|; |x| + |y|.
         let vertex = |vi: usize| {
@@ -418,9 +449,9 @@ impl WatertightRay {
             let sx = _mm256_set1_ps(self.shear.x);
             let sy = _mm256_set1_ps(self.shear.y);
             let (ox, oy, oz) = (
-                _mm256_set1_ps(self.origin[kx]),
-                _mm256_set1_ps(self.origin[ky]),
-                _mm256_set1_ps(self.origin[kz]),
+                _mm256_set1_ps(self.o_k[0]),
+                _mm256_set1_ps(self.o_k[1]),
+                _mm256_set1_ps(self.o_k[2]),
             );
             let vertex = {
                 #[inline(always)]
@@ -501,10 +532,9 @@ impl WatertightRay {
                 if det == 0.0 || !det.is_finite() {
                     continue;
                 }
-                let t = self.plane_t(p0, p1, p2);
-                if !(t > t_min && t < *t_max) {
+                let Some(t) = self.plane_t_within(p0, p1, p2, t_min, *t_max) else {
                     continue;
-                }
+                };
                 let inv = 1.0 / det;
                 Some((t, v * inv, w * inv))
             };
@@ -520,6 +550,77 @@ impl WatertightRay {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The plane distance's tests without division decide exactly as
+    /// dividing and comparing: random triangles and rays (origins near
+    /// the plane on either side, directions nearly in it), with interval
+    /// ends at the distance itself, one ulp either side, zeros of both
+    /// signs, negative, tiny and infinite values.
+    #[test]
+    fn plane_distance_decides_as_the_division() {
+        let mut s = 5u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let (mut early, mut divided) = (0, 0);
+        for k in 0..4000 {
+            let tri: [Vec3A; 3] = std::array::from_fn(|_| Vec3A::new(next(), next(), next()) * 3.0);
+            let normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize();
+            let on = tri[0] + (tri[1] - tri[0]) * next().abs() * 0.5;
+            // Origins at distances from 1e-6 to 10 off the plane, either side.
+            let off = next() * 10f32.powi(-(k % 7));
+            let o = on + normal * off + Vec3A::new(next(), next(), next()) * 0.1;
+            let mut d = Vec3A::new(next(), next(), next());
+            if k % 5 == 0 {
+                // Nearly in the plane.
+                d = (tri[2] - tri[1]) + normal * next() * 1e-4;
+            }
+            if d == Vec3A::ZERO {
+                continue;
+            }
+            let wt = WatertightRay::new(&Ray::new(o, d));
+            let p0 = tri[0].as_dvec3();
+            let n = (tri[1].as_dvec3() - p0).cross(tri[2].as_dvec3() - p0);
+            let t = (n.dot(p0 - o.as_dvec3()) / n.dot(d.as_dvec3())) as f32;
+            let ends = [
+                t,
+                t.next_up(),
+                t.next_down(),
+                -t,
+                0.0,
+                -0.0,
+                -1.0,
+                1.0,
+                1e-30,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+            ];
+            for &lo in &ends {
+                for &hi in &ends {
+                    let want = (t > lo && t < hi).then_some(t.to_bits());
+                    let got = wt.plane_t_within(tri[0], tri[1], tri[2], lo, hi);
+                    assert_eq!(
+                        got.map(f32::to_bits),
+                        want,
+                        "case {k}: t {t:e} in ({lo:e}, {hi:e})"
+                    );
+                    if want.is_none() {
+                        // Whether the division was needed to reject.
+                        let q_negative = t < 0.0 || (t == 0.0 && t.is_sign_negative());
+                        if (q_negative && lo >= 0.0) || t > hi {
+                            early += 1;
+                        } else {
+                            divided += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(early > 10_000 && divided > 10_000, "{early} / {divided}");
+    }
 
     /// Four (and eight) triangles side by side give, lane by lane, bit
     /// for bit what the one-triangle test gives, and the nearest of them,
