@@ -576,17 +576,17 @@ impl WatertightRay {
             Vec4::splat(self.origin[kz]),
         ];
         let tol = Vec4::splat(8.0 * f32::EPSILON);
-        for h in 0..if count <= 4 { 1 } else { 2 } {
-            let mut m = [Vec4::ZERO; 3];
-            for vi in 0..3 {
-                let v = &blocks[h].v[vi];
+        let halves = if count <= 4 { 1 } else { 2 };
+        for (h, block) in blocks.iter().enumerate().take(halves) {
+            let m: [Vec4; 3] = std::array::from_fn(|vi| {
+                let v = &block.v[vi];
                 let r = [kx, ky, kz].map(|a| Vec4::from_array(v[a]));
                 let r = [r[0] - o[0], r[1] - o[1], r[2] - o[2]];
-                m[vi] = max4(max4(r[0].abs(), r[1].abs()), r[2].abs());
-                for a in 0..3 {
-                    f.r[vi][a][4 * h..4 * h + 4].copy_from_slice(&r[a].to_array());
+                for (a, ra) in r.iter().enumerate() {
+                    f.r[vi][a][4 * h..4 * h + 4].copy_from_slice(&ra.to_array());
                 }
-            }
+                max4(max4(r[0].abs(), r[1].abs()), r[2].abs())
+            });
             for k in 0..3 {
                 let tm = tol * max4(m[(k + 1) % 3], m[(k + 2) % 3]);
                 f.tm[k][4 * h..4 * h + 4].copy_from_slice(&tm.to_array());
@@ -609,22 +609,23 @@ impl WatertightRay {
             use std::arch::x86_64::*;
             let k = self.k;
             let sign = _mm256_set1_ps(-0.0);
-            let mut m = [_mm256_setzero_ps(); 3];
-            for vi in 0..3 {
-                let mut mag = _mm256_setzero_ps();
-                for a in 0..3 {
-                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][k[a]]);
-                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][k[a]]);
-                    let r =
-                        _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[k[a]]));
-                    f.r[vi][a] = bytemuck::cast(r);
-                    let abs = _mm256_andnot_ps(sign, r);
-                    // max(max(|x|, |y|), |z|): exact, so any order of the
-                    // same maxima gives the same bits.
-                    mag = if a == 0 { abs } else { _mm256_max_ps(mag, abs) };
-                }
-                m[vi] = mag;
-            }
+            let m: [__m256; 3] = std::array::from_fn(
+                #[inline(always)]
+                |vi| {
+                    let mut mag = _mm256_setzero_ps();
+                    for (a, &ka) in k.iter().enumerate() {
+                        let lo: __m128 = bytemuck::cast(blocks[0].v[vi][ka]);
+                        let hi: __m128 = bytemuck::cast(blocks[1].v[vi][ka]);
+                        let r =
+                            _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[ka]));
+                        f.r[vi][a] = bytemuck::cast(r);
+                        let abs = _mm256_andnot_ps(sign, r);
+                        // max(max(|x|, |y|), |z|), in the order of `edges8_avx2`.
+                        mag = if a == 0 { abs } else { _mm256_max_ps(mag, abs) };
+                    }
+                    mag
+                },
+            );
             let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
             for e in 0..3 {
                 let tm = _mm256_mul_ps(tol, _mm256_max_ps(m[(e + 1) % 3], m[(e + 2) % 3]));
