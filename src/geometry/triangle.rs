@@ -609,23 +609,20 @@ impl WatertightRay {
             use std::arch::x86_64::*;
             let k = self.k;
             let sign = _mm256_set1_ps(-0.0);
-            let m: [__m256; 3] = std::array::from_fn(
-                #[inline(always)]
-                |vi| {
-                    let mut mag = _mm256_setzero_ps();
-                    for (a, &ka) in k.iter().enumerate() {
-                        let lo: __m128 = bytemuck::cast(blocks[0].v[vi][ka]);
-                        let hi: __m128 = bytemuck::cast(blocks[1].v[vi][ka]);
-                        let r =
-                            _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[ka]));
-                        f.r[vi][a] = bytemuck::cast(r);
-                        let abs = _mm256_andnot_ps(sign, r);
-                        // max(max(|x|, |y|), |z|), in the order of `edges8_avx2`.
-                        mag = if a == 0 { abs } else { _mm256_max_ps(mag, abs) };
-                    }
-                    mag
-                },
-            );
+            // (Plain loops: a closure passed to `std::array::from_fn` is not
+            // inlined here and would call every intrinsic as a function.)
+            let mut m = [_mm256_setzero_ps(); 3];
+            for (vi, mv) in m.iter_mut().enumerate() {
+                for (a, &ka) in k.iter().enumerate() {
+                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][ka]);
+                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][ka]);
+                    let r = _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[ka]));
+                    f.r[vi][a] = bytemuck::cast(r);
+                    let abs = _mm256_andnot_ps(sign, r);
+                    // max(max(|x|, |y|), |z|), in the order of `edges8_avx2`.
+                    *mv = if a == 0 { abs } else { _mm256_max_ps(*mv, abs) };
+                }
+            }
             let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
             for e in 0..3 {
                 let tm = _mm256_mul_ps(tol, _mm256_max_ps(m[(e + 1) % 3], m[(e + 2) % 3]));
