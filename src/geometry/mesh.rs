@@ -401,6 +401,12 @@ impl Mesh {
     #[inline(always)]
     fn frame_lanes(wt: &[WatertightRay; LANES], lanes: LaneMask) -> (LaneMask, usize) {
         let lead = lanes.trailing_zeros() as usize;
+        // Rays from scattered points (bounces) fail on the second lane:
+        // one comparison per packet.
+        let second = lanes & (lanes - 1);
+        if second == 0 || !wt[second.trailing_zeros() as usize].shares_frame(&wt[lead]) {
+            return (1 << lead, lead);
+        }
         let mut shared = 0;
         for_each_lane(
             lanes,

@@ -578,15 +578,19 @@ impl WatertightRay {
         let tol = Vec4::splat(8.0 * f32::EPSILON);
         let halves = if count <= 4 { 1 } else { 2 };
         for (h, block) in blocks.iter().enumerate().take(halves) {
-            let m: [Vec4; 3] = std::array::from_fn(|vi| {
+            let mut m = [Vec4::ZERO; 3];
+            for (vi, mv) in m.iter_mut().enumerate() {
                 let v = &block.v[vi];
-                let r = [kx, ky, kz].map(|a| Vec4::from_array(v[a]));
-                let r = [r[0] - o[0], r[1] - o[1], r[2] - o[2]];
+                let r = [
+                    Vec4::from_array(v[kx]) - o[0],
+                    Vec4::from_array(v[ky]) - o[1],
+                    Vec4::from_array(v[kz]) - o[2],
+                ];
                 for (a, ra) in r.iter().enumerate() {
                     f.r[vi][a][4 * h..4 * h + 4].copy_from_slice(&ra.to_array());
                 }
-                max4(max4(r[0].abs(), r[1].abs()), r[2].abs())
-            });
+                *mv = max4(max4(r[0].abs(), r[1].abs()), r[2].abs());
+            }
             for k in 0..3 {
                 let tm = tol * max4(m[(k + 1) % 3], m[(k + 2) % 3]);
                 f.tm[k][4 * h..4 * h + 4].copy_from_slice(&tm.to_array());
