@@ -27,7 +27,11 @@ pub const LEAF_TRIANGLES: u32 = 8;
 
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
-use crate::geometry::triangle::Tri4;
+use crate::geometry::triangle::{LeafFrame, Tri4};
+
+/// A packet's leaf visit by at least this many lanes that share an origin
+/// and permutation computes the leaf's [`LeafFrame`] once for them.
+const FRAME_LANES: u32 = 2;
 /// Re-exported: the triangle test meshes use.
 pub use crate::geometry::triangle::WatertightRay;
 
@@ -362,6 +366,58 @@ impl Mesh {
         })
     }
 
+    /// [`Self::leaf_hit`] with a [`LeafFrame`] of the leaf made by a ray
+    /// that [`WatertightRay::shares_frame`] with `wt`: the same hit.
+    #[inline(always)]
+    fn leaf_hit_framed<const AVX: bool>(
+        &self,
+        wt: &WatertightRay,
+        frame: &LeafFrame,
+        leaf: u32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<MeshHit> {
+        let lo = &self.blocks[2 * leaf as usize];
+        let hi = &self.blocks[2 * leaf as usize + 1];
+        let (lane, t, b1, b2) =
+            wt.intersect8_framed::<AVX>(frame, [lo, hi], lo.count + hi.count, t_min, t_max)?;
+        Some(MeshHit {
+            t,
+            triangle: lo.first + lane,
+            b1,
+            b2,
+        })
+    }
+
+    /// The [`LeafFrame`] of leaf `leaf` for rays sharing `wt`'s origin and
+    /// permutation.
+    #[inline(always)]
+    fn leaf_frame<const AVX: bool>(&self, wt: &WatertightRay, leaf: u32) -> LeafFrame {
+        let lo = &self.blocks[2 * leaf as usize];
+        let hi = &self.blocks[2 * leaf as usize + 1];
+        wt.frame8::<AVX>([lo, hi], lo.count + hi.count)
+    }
+
+    /// The lanes of `lanes` whose rays share a [`LeafFrame`] with the
+    /// lowest one (`lanes` non-empty), and that lane.
+    #[inline(always)]
+    fn frame_lanes(wt: &[WatertightRay; LANES], lanes: LaneMask) -> (LaneMask, usize) {
+        let lead = lanes.trailing_zeros() as usize;
+        // Rays from scattered points (bounces) fail on the second lane:
+        // one comparison per packet.
+        let second = lanes & (lanes - 1);
+        if second == 0 || !wt[second.trailing_zeros() as usize].shares_frame(&wt[lead]) {
+            return (1 << lead, lead);
+        }
+        let mut shared = 0;
+        for_each_lane(
+            lanes,
+            #[inline(always)]
+            |l| shared |= (wt[l].shares_frame(&wt[lead]) as LaneMask) << l,
+        );
+        (shared, lead)
+    }
+
     /// Starts loading the triangle block of leaf `leaf`.
     #[inline(always)]
     fn prefetch_leaf(&self, leaf: u32) {
@@ -548,12 +604,40 @@ impl Mesh {
         }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        let lanes = lanes & packet.valid;
+        if lanes == 0 {
+            return;
+        }
+        // Lanes that share one origin and permutation (a pinhole's camera
+        // rays) test a leaf from one frame of it.
+        let (shared, lead) = Self::frame_lanes(&wt, lanes);
         crate::accel::packet::traverse::<AVX>(
             &self.bvh,
             packet,
             lanes,
             #[inline(always)]
             |p, hit, leaf| {
+                let framed = hit & shared;
+                let hit = if framed.count_ones() >= FRAME_LANES {
+                    let frame = self.leaf_frame::<AVX>(&wt[lead], leaf);
+                    for_each_lane(
+                        framed,
+                        #[inline(always)]
+                        |l| {
+                            let reach = Self::reach(p.t_max[l], &best[l]);
+                            if let Some(h) =
+                                self.leaf_hit_framed::<AVX>(&wt[l], &frame, leaf, p.t_min[l], reach)
+                                && self.wins(h.t, h.triangle, &best[l])
+                            {
+                                p.t_max[l] = h.t;
+                                best[l] = Some(h);
+                            }
+                        },
+                    );
+                    hit & !framed
+                } else {
+                    hit
+                };
                 for_each_lane(
                     hit,
                     #[inline(always)]
@@ -599,6 +683,11 @@ impl Mesh {
         }
         let wt: [WatertightRay; LANES] =
             std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        let lanes = lanes & packet.valid;
+        if lanes == 0 {
+            return 0;
+        }
+        let (shared, lead) = Self::frame_lanes(&wt, lanes);
         let mut blocked = 0;
         crate::accel::packet::traverse::<AVX>(
             &self.bvh,
@@ -607,8 +696,29 @@ impl Mesh {
             #[inline(always)]
             |p, hit, leaf| {
                 let mut now = 0;
+                let framed = hit & shared;
+                let rest = if framed.count_ones() >= FRAME_LANES {
+                    let frame = self.leaf_frame::<AVX>(&wt[lead], leaf);
+                    for_each_lane(
+                        framed,
+                        #[inline(always)]
+                        |l| {
+                            if self
+                                .leaf_hit_framed::<AVX>(
+                                    &wt[l], &frame, leaf, p.t_min[l], p.t_max[l],
+                                )
+                                .is_some()
+                            {
+                                now |= 1 << l;
+                            }
+                        },
+                    );
+                    hit & !framed
+                } else {
+                    hit
+                };
                 for_each_lane(
-                    hit,
+                    rest,
                     #[inline(always)]
                     |l| {
                         if self
@@ -951,6 +1061,7 @@ pub fn mesh_bvh_builds() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::packet::ALL_LANES as ALL;
 
     /// Small triangles at geometrically growing distances along a line,
     /// from 1e-30 up: each triangle's nearest neighbour is the next
@@ -1043,6 +1154,132 @@ mod tests {
             }
         }
         assert!(hits > 50, "only {hits} of the rays hit the soup");
+    }
+
+    /// Packets of rays from one point (where leaves are tested from a
+    /// shared [`LeafFrame`]) find what single rays find, bit for bit: the
+    /// same triangle, `t` and barycentrics, and the same blocked lanes.
+    /// A closed bumpy sphere (shared edges and vertices everywhere) seen
+    /// from points around it, rays aimed at its vertices, edge midpoints
+    /// and inside its triangles, fanned around the diagonal between two
+    /// axes so that lanes of one packet have different permutations; some
+    /// packets have a lane from another origin, some finite intervals.
+    #[test]
+    fn camera_packets_give_single_ray_hits_bit_for_bit() {
+        let mut s = 21u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (rings, segments) = (24u32, 48u32);
+        let mut data = MeshData::default();
+        for i in 0..=rings {
+            let theta = std::f32::consts::PI * i as f32 / rings as f32;
+            for j in 0..segments {
+                let phi = std::f32::consts::TAU * j as f32 / segments as f32;
+                let r = 1.0 + 0.05 * next();
+                data.positions.push(
+                    Vec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.cos(),
+                        theta.sin() * phi.sin(),
+                    ) * r,
+                );
+            }
+        }
+        let at = |i: u32, j: u32| i * segments + j % segments;
+        for i in 0..rings {
+            for j in 0..segments {
+                let (a, b, c, d) = (at(i, j), at(i, j + 1), at(i + 1, j), at(i + 1, j + 1));
+                data.indices.push([a, c, b]);
+                data.indices.push([b, c, d]);
+            }
+        }
+        let mesh = Mesh::new("bumpy", data, NormalMode::Flat, BuildQuality::Medium).unwrap();
+        let bits = |h: Option<MeshHit>| {
+            h.map(|h| (h.t.to_bits(), h.triangle, h.b1.to_bits(), h.b2.to_bits()))
+        };
+        let (mut hits, mut mixed) = (0, 0);
+        for k in 0..1500u32 {
+            // The eye: along the diagonal between axis `a` and the next.
+            let a = (k % 3) as usize;
+            let mut axis = Vec3A::ZERO;
+            axis[a] = 1.0;
+            axis[(a + 1) % 3] = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let eye = axis * (1.5 + 2.0 * next()) + Vec3A::new(next(), next(), next()) * 0.1;
+            // Half the time a triangle where the view straight at the
+            // centre meets the surface (lanes straddle the diagonal), else
+            // any triangle.
+            let near = if (k / 2) % 2 == 0 {
+                axis.normalize() + Vec3A::new(next(), next(), next()) * 0.1
+            } else {
+                Vec3A::new(next(), next(), next()) * 2.0 - 1.0
+            };
+            let pick = (0..mesh.triangle_count())
+                .min_by(|&i, &j| {
+                    let d = |i: usize| (mesh.triangle(i)[0] - near).length_squared();
+                    d(i).total_cmp(&d(j))
+                })
+                .unwrap();
+            let tri = mesh.triangle(pick);
+            let rays: Vec<Ray> = (0..LANES)
+                .map(|l| {
+                    let target = match (k as usize + l) % 3 {
+                        0 => tri[l % 3],
+                        1 => (tri[l % 3] + tri[(l + 1) % 3]) * 0.5,
+                        _ => {
+                            tri[0]
+                                + (tri[1] - tri[0]) * next() * 0.5
+                                + (tri[2] - tri[0]) * next() * 0.5
+                        }
+                    };
+                    // A little off the target, so the fan spreads.
+                    let target =
+                        target + Vec3A::new(next(), next(), next()) * 0.02 * (k % 4) as f32;
+                    let o = if k % 7 == 0 && l == 5 {
+                        eye + Vec3A::Y * 1e-3
+                    } else {
+                        eye
+                    };
+                    Ray::new(o, target - o)
+                })
+                .collect();
+            let perms: Vec<_> = rays
+                .iter()
+                .map(|r| WatertightRay::new(r).permutation())
+                .collect();
+            mixed += perms.iter().any(|p| *p != perms[0]) as u32;
+            let t_max: Vec<f32> = (0..LANES)
+                .map(|_| {
+                    if k % 3 == 0 {
+                        0.5 + 3.0 * next()
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect();
+            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let mut packed = [None; LANES];
+            mesh.intersect_packet(&mut packet, ALL, &mut packed);
+            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let blocked = mesh.occluded_packet(&mut packet, ALL);
+            for (l, r) in rays.iter().enumerate() {
+                let want = mesh.intersect(r, 0.0, t_max[l]);
+                hits += want.is_some() as u32;
+                assert_eq!(bits(packed[l]), bits(want), "packet {k} lane {l}");
+                assert_eq!(
+                    (blocked >> l) & 1 == 1,
+                    want.is_some(),
+                    "shadow packet {k} lane {l}"
+                );
+            }
+        }
+        assert!(
+            hits > 8000 && mixed > 200,
+            "{hits} hits, {mixed} packets of mixed permutations"
+        );
     }
 }
 

@@ -21,6 +21,12 @@ pub struct WatertightRay {
 }
 
 impl WatertightRay {
+    /// The axis permutation `[kx, ky, kz]` (for tests).
+    #[cfg(test)]
+    pub(crate) fn permutation(&self) -> [usize; 3] {
+        self.k
+    }
+
     /// Prepares `ray` (direction must be non-zero).
     #[inline]
     pub fn new(ray: &Ray) -> Self {
@@ -547,6 +553,262 @@ impl WatertightRay {
     }
 }
 
+/// The part of the eight-triangle test of a leaf (two [`Tri4`] blocks)
+/// that does not depend on the ray's direction, shared by the rays of a
+/// packet that start at the same point and have the same axis
+/// permutation (the camera rays of a pinhole): each vertex minus the
+/// origin along the permuted axes, and the first factor of each edge's
+/// rounding bound. [`WatertightRay::intersect8_framed`] then skips those
+/// operations and gives the bits [`WatertightRay::intersect8`] gives.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+pub struct LeafFrame {
+    /// `r[vertex][axis][lane]`: vertex minus origin along `kx`, `ky`, `kz`.
+    r: [[[f32; 8]; 3]; 3],
+    /// `tm[edge][lane]`: `8 EPS` times the larger coordinate magnitude of
+    /// the edge's two vertices (edge `k` joins vertices `k + 1` and `k + 2`).
+    tm: [[f32; 8]; 3],
+}
+
+impl WatertightRay {
+    /// True when `other` starts at the same point (bit for bit) with the
+    /// same axis permutation, so that a [`LeafFrame`] made by one serves
+    /// the other.
+    #[inline(always)]
+    pub fn shares_frame(&self, other: &Self) -> bool {
+        self.k == other.k
+            && self.origin.to_array().map(f32::to_bits) == other.origin.to_array().map(f32::to_bits)
+    }
+
+    /// The [`LeafFrame`] of a leaf of `count` triangles stored as two
+    /// blocks, for rays that share this ray's origin and permutation. `AVX`
+    /// as in [`Self::intersect8`].
+    #[inline(always)]
+    pub fn frame8<const AVX: bool>(&self, blocks: [&Tri4; 2], count: u32) -> LeafFrame {
+        let mut f = LeafFrame {
+            r: [[[0.0; 8]; 3]; 3],
+            tm: [[0.0; 8]; 3],
+        };
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is set only by the AVX2 entry points, which run
+            // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
+            #[allow(unsafe_code)]
+            unsafe {
+                self.frame8_avx2(blocks, &mut f)
+            };
+            return f;
+        }
+        let [kx, ky, kz] = self.k;
+        let o = [
+            Vec4::splat(self.origin[kx]),
+            Vec4::splat(self.origin[ky]),
+            Vec4::splat(self.origin[kz]),
+        ];
+        let tol = Vec4::splat(8.0 * f32::EPSILON);
+        let halves = if count <= 4 { 1 } else { 2 };
+        for (h, block) in blocks.iter().enumerate().take(halves) {
+            let mut m = [Vec4::ZERO; 3];
+            for (vi, mv) in m.iter_mut().enumerate() {
+                let v = &block.v[vi];
+                let r = [
+                    Vec4::from_array(v[kx]) - o[0],
+                    Vec4::from_array(v[ky]) - o[1],
+                    Vec4::from_array(v[kz]) - o[2],
+                ];
+                for (a, ra) in r.iter().enumerate() {
+                    f.r[vi][a][4 * h..4 * h + 4].copy_from_slice(&ra.to_array());
+                }
+                *mv = max4(max4(r[0].abs(), r[1].abs()), r[2].abs());
+            }
+            for k in 0..3 {
+                let tm = tol * max4(m[(k + 1) % 3], m[(k + 2) % 3]);
+                f.tm[k][4 * h..4 * h + 4].copy_from_slice(&tm.to_array());
+            }
+        }
+        f
+    }
+
+    /// [`Self::frame8`] in AVX registers.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 and FMA; inlined into the AVX2 entry point
+    /// as [`Self::edges8_avx2`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn frame8_avx2(&self, blocks: [&Tri4; 2], f: &mut LeafFrame) {
+        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+        unsafe {
+            use std::arch::x86_64::*;
+            let k = self.k;
+            let sign = _mm256_set1_ps(-0.0);
+            // (Plain loops: a closure passed to `std::array::from_fn` is not
+            // inlined here and would call every intrinsic as a function.)
+            let mut m = [_mm256_setzero_ps(); 3];
+            for (vi, mv) in m.iter_mut().enumerate() {
+                for (a, &ka) in k.iter().enumerate() {
+                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][ka]);
+                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][ka]);
+                    let r = _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[ka]));
+                    f.r[vi][a] = bytemuck::cast(r);
+                    let abs = _mm256_andnot_ps(sign, r);
+                    // max(max(|x|, |y|), |z|), in the order of `edges8_avx2`.
+                    *mv = if a == 0 { abs } else { _mm256_max_ps(*mv, abs) };
+                }
+            }
+            let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
+            for e in 0..3 {
+                let tm = _mm256_mul_ps(tol, _mm256_max_ps(m[(e + 1) % 3], m[(e + 2) % 3]));
+                f.tm[e] = bytemuck::cast(tm);
+            }
+        }
+    }
+
+    /// [`Self::intersect8`] with the direction-independent part taken
+    /// from `frame`, made by a ray that [`Self::shares_frame`] with this
+    /// one for the same `blocks`: the same result, bit for bit.
+    #[inline(always)]
+    pub fn intersect8_framed<const AVX: bool>(
+        &self,
+        frame: &LeafFrame,
+        blocks: [&Tri4; 2],
+        count: u32,
+        t_min: f32,
+        mut t_max: f32,
+    ) -> Option<(u32, f32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `intersect8`.
+            #[allow(unsafe_code)]
+            let (lanes, e, bound) = unsafe { self.edges8_framed_avx2(frame) };
+            let interesting = lanes & ((1u32 << count) - 1);
+            if interesting == 0 {
+                return None;
+            }
+            return self.finish(
+                |l| blocks[l / 4].corners(l % 4),
+                interesting,
+                &e,
+                &bound,
+                t_min,
+                &mut t_max,
+            );
+        }
+        let mut e = [[0.0f32; 8]; 3];
+        let mut bound = [[0.0f32; 8]; 3];
+        let mut lanes = 0;
+        let (sx, sy) = (Vec4::splat(self.shear.x), Vec4::splat(self.shear.y));
+        for h in 0..if count <= 4 { 1 } else { 2 } {
+            let row = |vi: usize, a: usize| Vec4::from_slice(&frame.r[vi][a][4 * h..4 * h + 4]);
+            let vertex = |vi: usize| {
+                let (rx, ry, rz) = (row(vi, 0), row(vi, 1), row(vi, 2));
+                let x = rx - sx * rz;
+                let y = ry - sy * rz;
+                (x, y, x.abs() + y.abs())
+            };
+            let (ax, ay, sa) = vertex(0);
+            let (bx, by, sb) = vertex(1);
+            let (cx, cy, sc) = vertex(2);
+            let u = cx * by - cy * bx;
+            let v = ax * cy - ay * cx;
+            let w = bx * ay - by * ax;
+            let tm = |k: usize| Vec4::from_slice(&frame.tm[k][4 * h..4 * h + 4]);
+            let b0 = tm(0) * (sb + sc);
+            let b1 = tm(1) * (sc + sa);
+            let b2 = tm(2) * (sa + sb);
+            let clean = u.abs().cmpgt(b0) & v.abs().cmpgt(b1) & w.abs().cmpgt(b2);
+            let zero = Vec4::ZERO;
+            let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+            let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+            lanes |= (!clean | !(negative & positive)).bitmask() << (4 * h);
+            for (k, x) in [u, v, w].iter().enumerate() {
+                e[k][4 * h..4 * h + 4].copy_from_slice(&x.to_array());
+            }
+            for (k, x) in [b0, b1, b2].iter().enumerate() {
+                bound[k][4 * h..4 * h + 4].copy_from_slice(&x.to_array());
+            }
+        }
+        let interesting = lanes & ((1u32 << count) - 1);
+        if interesting == 0 {
+            return None;
+        }
+        self.finish(
+            |l| blocks[l / 4].corners(l % 4),
+            interesting,
+            &e,
+            &bound,
+            t_min,
+            &mut t_max,
+        )
+    }
+
+    /// The edge functions and bounds of [`Self::edges8_avx2`] from a
+    /// [`LeafFrame`].
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 and FMA; inlined into the AVX2 entry point
+    /// as [`Self::edges8_avx2`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn edges8_framed_avx2(&self, frame: &LeafFrame) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
+        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+        unsafe {
+            use std::arch::x86_64::*;
+            let sign = _mm256_set1_ps(-0.0);
+            let abs = {
+                #[inline(always)]
+                |x: __m256| _mm256_andnot_ps(sign, x)
+            };
+            let sx = _mm256_set1_ps(self.shear.x);
+            let sy = _mm256_set1_ps(self.shear.y);
+            let vertex = {
+                #[inline(always)]
+                |vi: usize| {
+                    let rx: __m256 = bytemuck::cast(frame.r[vi][0]);
+                    let ry: __m256 = bytemuck::cast(frame.r[vi][1]);
+                    let rz: __m256 = bytemuck::cast(frame.r[vi][2]);
+                    let x = _mm256_sub_ps(rx, _mm256_mul_ps(sx, rz));
+                    let y = _mm256_sub_ps(ry, _mm256_mul_ps(sy, rz));
+                    (x, y, _mm256_add_ps(abs(x), abs(y)))
+                }
+            };
+            let (ax, ay, sa) = vertex(0);
+            let (bx, by, sb) = vertex(1);
+            let (cx, cy, sc) = vertex(2);
+            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let tm = {
+                #[inline(always)]
+                |k: usize| -> __m256 { bytemuck::cast(frame.tm[k]) }
+            };
+            let b0 = _mm256_mul_ps(tm(0), _mm256_add_ps(sb, sc));
+            let b1 = _mm256_mul_ps(tm(1), _mm256_add_ps(sc, sa));
+            let b2 = _mm256_mul_ps(tm(2), _mm256_add_ps(sa, sb));
+            let gt = {
+                #[inline(always)]
+                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32
+            };
+            let lt = {
+                #[inline(always)]
+                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
+            };
+            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
+            let zero = _mm256_setzero_ps();
+            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
+            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
+            let lanes = (!clean | !(negative & positive)) & 0xff;
+            (
+                lanes,
+                [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
+                [bytemuck::cast(b0), bytemuck::cast(b1), bytemuck::cast(b2)],
+            )
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -702,5 +964,132 @@ mod tests {
             hits += want.is_some() as u32;
         }
         assert!(hits > 2000, "only {hits} hits");
+    }
+
+    /// A leaf's [`LeafFrame`], made by one ray of a packet, gives every
+    /// ray that shares it what the eight-triangle test gives, bit for bit
+    /// (the same triangle, `t` and barycentrics), on both code paths; rays
+    /// with another permutation or origin do not share it. Random leaves,
+    /// packets of rays from one origin fanned around the diagonal between
+    /// two axes (so their dominant axis or its sign differs from lane to
+    /// lane), aimed at corners, edges and a point inside (the re-check
+    /// path), some lanes moved to another origin, finite and infinite
+    /// interval ends.
+    #[test]
+    fn framed_lanes_equal_the_eight_triangle_test() {
+        let avx2 = crate::accel::simd::supported(crate::accel::simd::Isa::Avx2);
+        let mut s = 5u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let bits = |h: Option<(u32, f32, f32, f32)>| {
+            h.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
+        };
+        let (mut framed, mut apart, mut hits) = (0, 0, 0);
+        for k in 0..3000 {
+            let base = Vec3A::new(next(), next(), next());
+            let mut tris: Vec<[Vec3A; 3]> = Vec::new();
+            for _ in 0..8 {
+                let p = |n: &mut dyn FnMut() -> f32| base + Vec3A::new(n(), n(), n()) * 0.5;
+                let p0 = p(&mut next);
+                // Neighbours share an edge now and then.
+                let p1 = match tris.last() {
+                    Some(t) if k % 3 == 0 => t[2],
+                    _ => p(&mut next),
+                };
+                let p2 = p(&mut next);
+                tris.push([p0, p1, p2]);
+            }
+            let count = 1 + k % 8;
+            let first = Tri4::new(&tris[..count.min(4)], 0);
+            let second = if count > 4 {
+                Tri4::new(&tris[4..count], 4)
+            } else {
+                Tri4 { count: 0, ..first }
+            };
+            let blocks = [&first, &second];
+            // The fan: around the diagonal between axis `a` and the next,
+            // on the side `sign`, from a distance.
+            let a = k % 3;
+            let mut axis = Vec3A::ZERO;
+            axis[a] = 1.0;
+            axis[(a + 1) % 3] = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let o =
+                base - axis * (2.0 + 2.0 * next().abs()) + Vec3A::new(next(), next(), next()) * 0.2;
+            let t_max = if k % 4 == 0 {
+                1.0 + 3.0 * next().abs()
+            } else {
+                f32::INFINITY
+            };
+            let rays: Vec<WatertightRay> = (0..8)
+                .map(|l| {
+                    let aim = &tris[(k + l) % count];
+                    let target = match l % 3 {
+                        0 => aim[(k / 3) % 3],
+                        1 => (aim[0] + aim[1]) * 0.5,
+                        _ => (aim[0] + aim[1] + aim[2]) / 3.0,
+                    };
+                    let origin = if k % 5 == 0 && l == 3 {
+                        o + Vec3A::X * 1e-3
+                    } else {
+                        o
+                    };
+                    WatertightRay::new(&Ray::new(origin, target - origin))
+                })
+                .collect();
+            let lead = (k / 8) % 8;
+            let frames = [
+                rays[lead].frame8::<false>(blocks, count as u32),
+                if avx2 {
+                    rays[lead].frame8::<true>(blocks, count as u32)
+                } else {
+                    rays[lead].frame8::<false>(blocks, count as u32)
+                },
+            ];
+            for (l, wt) in rays.iter().enumerate() {
+                let same = wt.k == rays[lead].k && wt.origin == rays[lead].origin;
+                assert_eq!(wt.shares_frame(&rays[lead]), same, "case {k} lane {l}");
+                if !same {
+                    apart += 1;
+                    continue;
+                }
+                framed += 1;
+                // One triangle at a time, as the eight-triangle test must.
+                let mut reach = t_max;
+                let mut want = None;
+                for (i, t) in tris[..count].iter().enumerate() {
+                    if let Some((t, b1, b2)) = wt.intersect(t[0], t[1], t[2], 0.0, reach) {
+                        reach = t;
+                        want = Some((i as u32, t.to_bits(), b1.to_bits(), b2.to_bits()));
+                    }
+                }
+                hits += want.is_some() as u32;
+                let got = bits(wt.intersect8_framed::<false>(
+                    &frames[0],
+                    blocks,
+                    count as u32,
+                    0.0,
+                    t_max,
+                ));
+                assert_eq!(got, want, "case {k} lane {l}, portable");
+                if avx2 {
+                    let got = bits(wt.intersect8_framed::<true>(
+                        &frames[1],
+                        blocks,
+                        count as u32,
+                        0.0,
+                        t_max,
+                    ));
+                    assert_eq!(got, want, "case {k} lane {l}, avx2");
+                }
+            }
+        }
+        assert!(
+            framed > 10_000 && apart > 2000 && hits > 5000,
+            "{framed} lanes framed, {apart} apart, {hits} hits"
+        );
     }
 }
