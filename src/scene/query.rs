@@ -258,13 +258,14 @@ impl RenderScene {
 
     #[inline(always)]
     fn occluded_kernel<const AVX: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        if self
-            .tlas
-            .unbounded
-            .iter()
-            .any(|&i| self.occludes_instance::<AVX>(i, ray, t_min, t_max))
-        {
-            return true;
+        // A plain loop, not `Iterator::any` with a closure: a closure left
+        // out of line is compiled without the AVX2 entry point's features
+        // and calls every intrinsic of the inlined shape and mesh tests as a
+        // function (`objdump -d` showed 239 such calls in each).
+        for &i in &self.tlas.unbounded {
+            if self.occludes_instance::<AVX>(i, ray, t_min, t_max) {
+                return true;
+            }
         }
         if self.tlas.leaf_instances.is_empty() {
             return false;
@@ -507,14 +508,13 @@ impl RenderScene {
     ) -> LaneMask {
         let n = rays.len().min(LANES);
         let mut blocked: LaneMask = 0;
+        // Plain loops, as in `occluded_kernel` (no out-of-line closure).
         for (l, ray) in rays[..n].iter().enumerate() {
-            if self
-                .tlas
-                .unbounded
-                .iter()
-                .any(|&i| self.occludes_instance::<AVX>(i, ray, 0.0, t_max[l]))
-            {
-                blocked |= 1 << l;
+            for &i in &self.tlas.unbounded {
+                if self.occludes_instance::<AVX>(i, ray, 0.0, t_max[l]) {
+                    blocked |= 1 << l;
+                    break;
+                }
             }
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
