@@ -33,6 +33,24 @@ impl Ray {
     }
 }
 
+/// Whether all `rays` point into one octant (the same signs of their
+/// direction components): the packets worth tracing together; the others
+/// cost less one ray at a time.
+#[inline(always)]
+pub fn one_octant(rays: &[Ray]) -> bool {
+    let octant = |r: &Ray| {
+        let d = r.direction;
+        (d.x.is_sign_negative() as u8)
+            | (d.y.is_sign_negative() as u8) << 1
+            | (d.z.is_sign_negative() as u8) << 2
+    };
+    let Some(first) = rays.first() else {
+        return true;
+    };
+    let first = octant(first);
+    rays.iter().all(|r| octant(r) == first)
+}
+
 /// A ray cone (Akenine-Möller et al., "Texture Level of Detail Strategies
 /// for Real-Time Ray Tracing", Ray Tracing Gems 2019): the footprint a
 /// ray stands for, a cone of `width` at the ray's origin widening by

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
 use crate::accel::packet::{LANES, LaneMask, for_each_lane};
-use crate::core::math::{Color, Ray, RayCone, max_component};
+use crate::core::math::{Color, Ray, RayCone, max_component, one_octant};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
@@ -144,21 +144,6 @@ fn add_specular(
         }
         *radiance += s.weight * trace(scene, settings, &s.ray, it.cone, depth + 1, t, counters);
     }
-}
-
-/// Whether all `rays` point into one octant: the packets worth tracing
-/// together (the others are traced one ray at a time, which costs them
-/// less).
-#[inline(always)]
-fn one_octant(rays: &[Ray]) -> bool {
-    let octant = |r: &Ray| {
-        let d = r.direction;
-        (d.x.is_sign_negative() as u8)
-            | (d.y.is_sign_negative() as u8) << 1
-            | (d.z.is_sign_negative() as u8) << 2
-    };
-    let first = octant(&rays[0]);
-    rays.iter().all(|r| octant(r) == first)
 }
 
 /// [`trace`] of up to [`LANES`] camera rays (cone `cone`, depth 0) into

@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use crate::accel::packet::{LANES, LaneMask};
-use crate::core::math::{Color, Ray, RayCone, max_component};
+use crate::core::math::{Color, Ray, RayCone, max_component, one_octant};
 use crate::core::rng::SamplerSeed;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
@@ -166,19 +166,6 @@ pub fn intersect_closest(
     if route {
         route_rays(classes, &found.0, escaped, hits);
     }
-}
-
-/// Whether all `rays` point into one octant: the packets worth tracing
-/// together (others are traced one at a time, which costs them less).
-fn one_octant(rays: &[Ray]) -> bool {
-    let octant = |r: &Ray| {
-        let d = r.direction;
-        (d.x.is_sign_negative() as u8)
-            | (d.y.is_sign_negative() as u8) << 1
-            | (d.z.is_sign_negative() as u8) << 2
-    };
-    let first = octant(&rays[0]);
-    rays.iter().all(|r| octant(r) == first)
 }
 
 /// How [`sample_media`] changed one ray: it now ends on `hit` (a surface)
