@@ -405,23 +405,11 @@ impl WatertightRay {
         let (ax, ay, ma, sa) = vertex(0);
         let (bx, by, mb, sb) = vertex(1);
         let (cx, cy, mc, sc) = vertex(2);
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
         let tol = Vec4::splat(8.0 * f32::EPSILON);
         let b0 = tol * max4(mb, mc) * (sb + sc);
         let b1 = tol * max4(mc, ma) * (sc + sa);
         let b2 = tol * max4(ma, mb) * (sa + sb);
-        let clean = u.abs().cmpgt(b0) & v.abs().cmpgt(b1) & w.abs().cmpgt(b2);
-        let zero = Vec4::ZERO;
-        let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
-        let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
-        let lanes = (!clean | !(negative & positive)).bitmask();
-        (
-            lanes,
-            [u.to_array(), v.to_array(), w.to_array()],
-            [b0.to_array(), b1.to_array(), b2.to_array()],
-        )
+        edge_lanes4([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
     }
 
     /// [`Self::edges4`] for the eight lanes of two blocks in AVX
@@ -474,9 +462,6 @@ impl WatertightRay {
             let (ax, ay, ma, sa) = vertex(0);
             let (bx, by, mb, sb) = vertex(1);
             let (cx, cy, mc, sc) = vertex(2);
-            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
             let tol = _mm256_set1_ps(8.0 * f32::EPSILON);
             let bound = {
                 #[inline(always)]
@@ -490,24 +475,7 @@ impl WatertightRay {
             let b0 = bound(mb, mc, sb, sc);
             let b1 = bound(mc, ma, sc, sa);
             let b2 = bound(ma, mb, sa, sb);
-            let gt = {
-                #[inline(always)]
-                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32
-            };
-            let lt = {
-                #[inline(always)]
-                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
-            };
-            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
-            let zero = _mm256_setzero_ps();
-            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
-            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
-            let lanes = (!clean | !(negative & positive)) & 0xff;
-            (
-                lanes,
-                [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
-                [bytemuck::cast(b0), bytemuck::cast(b1), bytemuck::cast(b2)],
-            )
+            edge_lanes8_avx2([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
         }
     }
 
@@ -710,23 +678,15 @@ impl WatertightRay {
             let (ax, ay, sa) = vertex(0);
             let (bx, by, sb) = vertex(1);
             let (cx, cy, sc) = vertex(2);
-            let u = cx * by - cy * bx;
-            let v = ax * cy - ay * cx;
-            let w = bx * ay - by * ax;
             let tm = |k: usize| Vec4::from_slice(&frame.tm[k][4 * h..4 * h + 4]);
             let b0 = tm(0) * (sb + sc);
             let b1 = tm(1) * (sc + sa);
             let b2 = tm(2) * (sa + sb);
-            let clean = u.abs().cmpgt(b0) & v.abs().cmpgt(b1) & w.abs().cmpgt(b2);
-            let zero = Vec4::ZERO;
-            let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
-            let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
-            lanes |= (!clean | !(negative & positive)).bitmask() << (4 * h);
-            for (k, x) in [u, v, w].iter().enumerate() {
-                e[k][4 * h..4 * h + 4].copy_from_slice(&x.to_array());
-            }
-            for (k, x) in [b0, b1, b2].iter().enumerate() {
-                bound[k][4 * h..4 * h + 4].copy_from_slice(&x.to_array());
+            let (l, eh, bh) = edge_lanes4([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2]);
+            lanes |= l << (4 * h);
+            for k in 0..3 {
+                e[k][4 * h..4 * h + 4].copy_from_slice(&eh[k]);
+                bound[k][4 * h..4 * h + 4].copy_from_slice(&bh[k]);
             }
         }
         let interesting = lanes & ((1u32 << count) - 1);
@@ -777,9 +737,6 @@ impl WatertightRay {
             let (ax, ay, sa) = vertex(0);
             let (bx, by, sb) = vertex(1);
             let (cx, cy, sc) = vertex(2);
-            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
             let tm = {
                 #[inline(always)]
                 |k: usize| -> __m256 { bytemuck::cast(frame.tm[k]) }
@@ -787,25 +744,80 @@ impl WatertightRay {
             let b0 = _mm256_mul_ps(tm(0), _mm256_add_ps(sb, sc));
             let b1 = _mm256_mul_ps(tm(1), _mm256_add_ps(sc, sa));
             let b2 = _mm256_mul_ps(tm(2), _mm256_add_ps(sa, sb));
-            let gt = {
-                #[inline(always)]
-                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32
-            };
-            let lt = {
-                #[inline(always)]
-                |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
-            };
-            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
-            let zero = _mm256_setzero_ps();
-            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
-            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
-            let lanes = (!clean | !(negative & positive)) & 0xff;
-            (
-                lanes,
-                [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
-                [bytemuck::cast(b0), bytemuck::cast(b1), bytemuck::cast(b2)],
-            )
+            edge_lanes8_avx2([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
         }
+    }
+}
+
+/// The edge functions `u, v, w` of four triangles from their sheared
+/// vertices `(x, y)`, given their rounding bounds: the lanes whose edge
+/// test passed (all signs alike) or needs the re-check (some edge within
+/// its bound), with the edge functions and the bounds as arrays. Shared by
+/// the per-ray and the framed tests: the same operations, so the same bits.
+#[inline(always)]
+fn edge_lanes4(xy: [(Vec4, Vec4); 3], b: [Vec4; 3]) -> (u32, [[f32; 4]; 3], [[f32; 4]; 3]) {
+    let [(ax, ay), (bx, by), (cx, cy)] = xy;
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let clean = u.abs().cmpgt(b[0]) & v.abs().cmpgt(b[1]) & w.abs().cmpgt(b[2]);
+    let zero = Vec4::ZERO;
+    let negative = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+    let positive = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+    let lanes = (!clean | !(negative & positive)).bitmask();
+    (
+        lanes,
+        [u.to_array(), v.to_array(), w.to_array()],
+        b.map(|x| x.to_array()),
+    )
+}
+
+/// [`edge_lanes4`] for eight lanes in AVX registers.
+///
+/// # Safety
+/// Only on a CPU with AVX2 and FMA; `#[inline(always)]` without a
+/// `#[target_feature]`, inlined into the AVX2 entry point with its
+/// intrinsics (see [`crate::accel::simd`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn edge_lanes8_avx2(
+    xy: [(std::arch::x86_64::__m256, std::arch::x86_64::__m256); 3],
+    b: [std::arch::x86_64::__m256; 3],
+) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
+    // SAFETY: the caller runs on a CPU with AVX2 and FMA.
+    unsafe {
+        use std::arch::x86_64::*;
+        let [(ax, ay), (bx, by), (cx, cy)] = xy;
+        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let abs = {
+            #[inline(always)]
+            |x: __m256| _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)
+        };
+        let gt = {
+            #[inline(always)]
+            |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(a, b)) as u32
+        };
+        let lt = {
+            #[inline(always)]
+            |a: __m256, b: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
+        };
+        let clean = gt(abs(u), b[0]) & gt(abs(v), b[1]) & gt(abs(w), b[2]);
+        let zero = _mm256_setzero_ps();
+        let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
+        let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
+        let lanes = (!clean | !(negative & positive)) & 0xff;
+        (
+            lanes,
+            [bytemuck::cast(u), bytemuck::cast(v), bytemuck::cast(w)],
+            [
+                bytemuck::cast(b[0]),
+                bytemuck::cast(b[1]),
+                bytemuck::cast(b[2]),
+            ],
+        )
     }
 }
 
