@@ -186,7 +186,7 @@ fn h_at_nodes(omega: f64) -> ([f64; H_NODES], [f64; H_NODES], [f64; H_NODES]) {
 
 /// Chandrasekhar's H-function of isotropic scattering with
 /// single-scattering albedo `omega` at direction cosine `mu`: the integral
-/// equation solved at the nodes ([`h_at_nodes`]), then evaluated at `mu`
+/// equation solved on 48 Gauss-Legendre nodes of `[0, 1]`, then evaluated at `mu`
 /// by the equation itself (Nystrom interpolation).
 pub fn chandrasekhar_h(omega: f64, mu: f64) -> f64 {
     let (x, w, h) = h_at_nodes(omega);
