@@ -192,17 +192,26 @@ impl NodeRay {
         // SAFETY: the caller runs on a CPU with AVX2 and FMA.
         unsafe {
             use std::arch::x86_64::*;
-            let mut enter = _mm256_set1_ps(t_min);
-            let mut exit = _mm256_set1_ps(t_max);
+            let mut tn = [_mm256_setzero_ps(); 3];
+            let mut tf = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
                 let near: __m256 = bytemuck::cast(node.planes[self.near[a] as usize]);
                 let far: __m256 = bytemuck::cast(node.planes[self.far[a] as usize]);
                 let inv = _mm256_set1_ps(self.inv[a]);
-                let tn = _mm256_fmsub_ps(near, inv, _mm256_set1_ps(self.o_inv[0][a]));
-                let tf = _mm256_fmsub_ps(far, inv, _mm256_set1_ps(self.o_inv[1][a]));
-                enter = _mm256_max_ps(tn, enter);
-                exit = _mm256_min_ps(tf, exit);
+                tn[a] = _mm256_fmsub_ps(near, inv, _mm256_set1_ps(self.o_inv[0][a]));
+                tf[a] = _mm256_fmsub_ps(far, inv, _mm256_set1_ps(self.o_inv[1][a]));
             }
+            // The fused form runs only with finite `inv`: no slab distance
+            // is NaN, so the maxima and minima can be taken as a tree (a
+            // shorter chain of dependent operations) with the same result.
+            let enter = _mm256_max_ps(
+                _mm256_max_ps(tn[0], tn[1]),
+                _mm256_max_ps(tn[2], _mm256_set1_ps(t_min)),
+            );
+            let exit = _mm256_min_ps(
+                _mm256_min_ps(tf[0], tf[1]),
+                _mm256_min_ps(tf[2], _mm256_set1_ps(t_max)),
+            );
             let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
             (mask, bytemuck::cast(enter))
         }
