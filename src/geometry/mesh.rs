@@ -14,6 +14,7 @@ use crate::accel::bvh8::Bvh8;
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
+use crate::accel::packet16::{LANES16, Packet16};
 use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
@@ -27,7 +28,7 @@ pub const LEAF_TRIANGLES: u32 = 8;
 
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
-use crate::geometry::triangle::{LeafFrame, Tri4};
+use crate::geometry::triangle::{LeafFrame, Shears16, Tri4};
 
 /// A packet's leaf visit by at least this many lanes that share an origin
 /// and permutation computes the leaf's [`LeafFrame`] once for them.
@@ -656,6 +657,122 @@ impl Mesh {
         );
     }
 
+    /// [`Self::intersect_packet_kernel`] for packets of 16
+    /// ([`crate::accel::packet16`]). Lanes that share an origin and
+    /// permutation with the packet's first (a pinhole's camera rays) test
+    /// a leaf together, triangle by triangle across the lanes
+    /// ([`WatertightRay::intersect8_lanes16`]); the others lane by lane.
+    /// Either way each lane gets the hit [`Self::intersect`] gives it.
+    #[inline(always)]
+    pub(crate) fn intersect_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        packet: &mut Packet16,
+        lanes: LaneMask,
+        best: &mut [Option<MeshHit>; LANES16],
+    ) {
+        let lanes = lanes & packet.valid;
+        if !matches!(self.structure, Structure::Bvh) {
+            for_each_lane(
+                lanes,
+                #[inline(always)]
+                |l| {
+                    if let Some(h) = self.intersect_kernel::<AVX>(
+                        &packet.rays[l],
+                        packet.t_min[l],
+                        packet.t_max[l],
+                    ) {
+                        packet.t_max[l] = h.t;
+                        best[l] = Some(h);
+                    }
+                },
+            );
+            return;
+        }
+        if lanes == 0 {
+            return;
+        }
+        let wt: [WatertightRay; LANES16] =
+            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        let lead = lanes.trailing_zeros() as usize;
+        let mut shared = 0;
+        for_each_lane(
+            lanes,
+            #[inline(always)]
+            |l| shared |= (wt[l].shares_frame(&wt[lead]) as LaneMask) << l,
+        );
+        let shears = Shears16::new(&wt);
+        crate::accel::packet16::traverse16::<AVX, AVX512>(
+            &self.bvh,
+            packet,
+            lanes,
+            #[inline(always)]
+            |p, hit, leaf| {
+                let framed = hit & shared;
+                let hit = if framed.count_ones() >= FRAME_LANES {
+                    let lo = &self.blocks[2 * leaf as usize];
+                    let hi = &self.blocks[2 * leaf as usize + 1];
+                    let count = lo.count + hi.count;
+                    let frame = wt[lead].frame8::<AVX>([lo, hi], count);
+                    // Each lane searches up to its reach (one ulp past a
+                    // known hit, so an equal `t` can win on index), then
+                    // its leaf hit must win against what it had.
+                    let mut reach = p.t_max;
+                    for_each_lane(
+                        framed,
+                        #[inline(always)]
+                        |l| reach[l] = Self::reach(p.t_max[l], &best[l]),
+                    );
+                    let mut out = [(0, 0.0, 0.0, 0.0); LANES16];
+                    let found = WatertightRay::intersect8_lanes16::<AVX512>(
+                        &wt,
+                        &shears,
+                        &frame,
+                        [lo, hi],
+                        count,
+                        framed,
+                        &p.t_min,
+                        &mut reach,
+                        &mut out,
+                    );
+                    for_each_lane(
+                        found,
+                        #[inline(always)]
+                        |l| {
+                            let (lane, t, b1, b2) = out[l];
+                            let h = MeshHit {
+                                t,
+                                triangle: lo.first + lane,
+                                b1,
+                                b2,
+                            };
+                            if self.wins(h.t, h.triangle, &best[l]) {
+                                p.t_max[l] = h.t;
+                                best[l] = Some(h);
+                            }
+                        },
+                    );
+                    hit & !framed
+                } else {
+                    hit
+                };
+                for_each_lane(
+                    hit,
+                    #[inline(always)]
+                    |l| {
+                        let reach = Self::reach(p.t_max[l], &best[l]);
+                        if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
+                            && self.wins(h.t, h.triangle, &best[l])
+                        {
+                            p.t_max[l] = h.t;
+                            best[l] = Some(h);
+                        }
+                    },
+                );
+                0
+            },
+        );
+    }
+
     /// The lanes of `packet` in `lanes` that hit any triangle within their
     /// intervals; each lane stops at its first blocker.
     #[inline(always)]
@@ -800,6 +917,21 @@ impl Mesh {
             lanes: LaneMask,
             best: &mut [Option<MeshHit>; LANES],
         ) -> () => Mesh, intersect_packet_kernel
+    }
+
+    crate::simd_entry_wide! {
+        /// Closest hits for the lanes of a packet of 16 (rays in object
+        /// space), by packet traversal ([`crate::accel::packet16`]): as
+        /// [`Self::intersect_packet`], `best[l]` is replaced when lane `l`
+        /// finds a nearer hit than `packet.t_max[l]`, which is shrunk to
+        /// it. Each lane gets the hit [`Self::intersect`] gives it, bit
+        /// for bit, on every SIMD path.
+        pub fn intersect_packet16(
+            &self,
+            packet: &mut Packet16,
+            lanes: LaneMask,
+            best: &mut [Option<MeshHit>; LANES16],
+        ) -> () => Mesh, intersect_packet16_kernel
     }
 
     crate::simd_entry! {
