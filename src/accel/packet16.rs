@@ -102,38 +102,52 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
     if bvh.nodes.is_empty() || alive == 0 {
         return;
     }
-    let node_rays: [NodeRay; LANES16] = std::array::from_fn(|l| NodeRay::new(&packet.rays[l], bvh));
-    let lead = alive.trailing_zeros() as usize;
-    let octant = node_rays[lead].octant;
-    let mut mixed = false;
-    for_each_lane(
-        alive,
-        #[inline(always)]
-        |l| mixed |= node_rays[l].octant != octant,
-    );
-    if mixed {
-        for_each_lane(
-            alive,
-            #[inline(always)]
-            |l| {
-                single_lane::<AVX>(bvh, 0, &node_rays[l], packet, l, &mut leaf);
-            },
-        );
-        return;
-    }
+    // The lanes prepared as `NodeRay::new` prepares a ray, in loops over
+    // the lanes that the compiler widens (one division per axis for the
+    // whole packet on the AVX-512 path). Lanes that diverge later prepare
+    // their own `NodeRay`: the same values.
     let mut lanes = Lanes {
         o_near: [[0.0; LANES16]; 3],
         o_far: [[0.0; LANES16]; 3],
         inv: [[0.0; LANES16]; 3],
         near: [0; 3],
     };
-    for a in 0..3 {
-        lanes.near[a] = node_rays[lead].near[a] as usize;
-        for (l, r) in node_rays.iter().enumerate() {
-            lanes.o_near[a][l] = r.o_near[a];
-            lanes.o_far[a][l] = r.o_far[a];
-            lanes.inv[a][l] = r.inv[a];
+    let mut margin = [0.0f32; LANES16];
+    let mut o = [[0.0f32; LANES16]; 3];
+    let mut d = [[0.0f32; LANES16]; 3];
+    for (l, r) in packet.rays.iter().enumerate() {
+        margin[l] = crate::accel::node::margin(r.origin.abs().max_element(), bvh.magnitude);
+        for a in 0..3 {
+            o[a][l] = r.origin[a];
+            d[a][l] = r.direction[a];
         }
+    }
+    let lead = alive.trailing_zeros() as usize;
+    let mut mixed = false;
+    for a in 0..3 {
+        let mut down: LaneMask = 0;
+        for l in 0..LANES16 {
+            let inv = 1.0 / d[a][l];
+            let shift = margin[l].copysign(inv);
+            lanes.inv[a][l] = inv;
+            lanes.o_near[a][l] = o[a][l] + shift;
+            lanes.o_far[a][l] = o[a][l] - shift;
+            down |= (inv.is_sign_negative() as LaneMask) << l;
+        }
+        let down = down & alive;
+        mixed |= down != 0 && down != alive;
+        lanes.near[a] = a + 3 * ((down >> lead) & 1) as usize;
+    }
+    if mixed {
+        for_each_lane(
+            alive,
+            #[inline(always)]
+            |l| {
+                let ray = NodeRay::new(&packet.rays[l], bvh);
+                single_lane::<AVX>(bvh, 0, &ray, packet, l, &mut leaf);
+            },
+        );
+        return;
     }
     let mut fixed = [const { MaybeUninit::<Pending>::uninit() }; FIXED];
     let mut top = 0;
@@ -171,7 +185,8 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
                 go,
                 #[inline(always)]
                 |l| {
-                    if single_lane::<AVX>(bvh, cur, &node_rays[l], packet, l, &mut leaf) {
+                    let ray = NodeRay::new(&packet.rays[l], bvh);
+                    if single_lane::<AVX>(bvh, cur, &ray, packet, l, &mut leaf) {
                         alive &= !(1 << l);
                     }
                 },

@@ -691,15 +691,18 @@ impl Mesh {
         if lanes == 0 {
             return;
         }
-        let wt: [WatertightRay; LANES16] =
-            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        // (A loop rather than `std::array::from_fn`, whose closure is not
+        // inlined into the entry point.)
+        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES16];
+        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+            *w = WatertightRay::new(r);
+        }
         let lead = lanes.trailing_zeros() as usize;
         let mut shared = 0;
-        for_each_lane(
-            lanes,
-            #[inline(always)]
-            |l| shared |= (wt[l].shares_frame(&wt[lead]) as LaneMask) << l,
-        );
+        for (l, w) in wt.iter().enumerate() {
+            shared |= (w.shares_frame(&wt[lead]) as LaneMask) << l;
+        }
+        let shared = shared & lanes;
         let shears = Shears16::new(&wt);
         crate::accel::packet16::traverse16::<AVX, AVX512>(
             &self.bvh,
@@ -1285,6 +1288,22 @@ mod tests {
                 assert_eq!(mesh.occluded(r, 0.0, f32::INFINITY), want.is_some());
             }
         }
+        for (k, chunk) in rays.chunks(LANES16).enumerate() {
+            let n = chunk.len();
+            let mut packet = Packet16::new(chunk, &vec![0.0; n], &vec![f32::INFINITY; n]);
+            let mut packed = [None; LANES16];
+            let lanes = packet.valid;
+            mesh.intersect_packet16(&mut packet, lanes, &mut packed);
+            for (l, r) in chunk.iter().enumerate() {
+                let want = mesh.intersect_brute_force(r, 0.0, f32::INFINITY);
+                assert_eq!(
+                    packed[l].map(|h| h.t),
+                    want.map(|h| h.t),
+                    "packet16 ray {}",
+                    k * LANES16 + l
+                );
+            }
+        }
         assert!(hits > 50, "only {hits} of the rays hit the soup");
     }
 
@@ -1296,8 +1315,18 @@ mod tests {
     /// and inside its triangles, fanned around the diagonal between two
     /// axes so that lanes of one packet have different permutations; some
     /// packets have a lane from another origin, some finite intervals.
+    /// Packets of 16 ([`Mesh::intersect_packet16`], lane-major leaf tests)
+    /// are checked on every SIMD path this CPU has.
     #[test]
     fn camera_packets_give_single_ray_hits_bit_for_bit() {
+        use crate::accel::simd::{self, Isa};
+        let isas: Vec<Isa> = [Isa::Portable, Isa::Avx2, Isa::Avx512]
+            .into_iter()
+            .filter(|&i| simd::supported(i))
+            .collect();
+        // Lanes of packets of 16 whose hit differs from the single ray's,
+        // per path.
+        let mut wrong16 = vec![0u32; isas.len()];
         let mut s = 21u64;
         let mut next = || {
             s = s
@@ -1356,7 +1385,7 @@ mod tests {
                 })
                 .unwrap();
             let tri = mesh.triangle(pick);
-            let rays: Vec<Ray> = (0..LANES)
+            let rays16: Vec<Ray> = (0..LANES16)
                 .map(|l| {
                     let target = match (k as usize + l) % 3 {
                         0 => tri[l % 3],
@@ -1378,12 +1407,13 @@ mod tests {
                     Ray::new(o, target - o)
                 })
                 .collect();
+            let rays = &rays16[..LANES];
             let perms: Vec<_> = rays
                 .iter()
                 .map(|r| WatertightRay::new(r).permutation())
                 .collect();
             mixed += perms.iter().any(|p| *p != perms[0]) as u32;
-            let t_max: Vec<f32> = (0..LANES)
+            let t_max16: Vec<f32> = (0..LANES16)
                 .map(|_| {
                     if k % 3 == 0 {
                         0.5 + 3.0 * next()
@@ -1392,11 +1422,27 @@ mod tests {
                     }
                 })
                 .collect();
-            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let t_max = &t_max16[..LANES];
+            let mut packet = Packet::new(rays, &[0.0; LANES], t_max);
             let mut packed = [None; LANES];
             mesh.intersect_packet(&mut packet, ALL, &mut packed);
-            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let mut packet = Packet::new(rays, &[0.0; LANES], t_max);
             let blocked = mesh.occluded_packet(&mut packet, ALL);
+            for (i, &isa) in isas.iter().enumerate() {
+                assert!(simd::force(isa));
+                let mut packet = Packet16::new(&rays16, &[0.0; LANES16], &t_max16);
+                let mut packed = [None; LANES16];
+                mesh.intersect_packet16(
+                    &mut packet,
+                    crate::accel::packet16::ALL_LANES16,
+                    &mut packed,
+                );
+                simd::force(simd::detected());
+                for (l, r) in rays16.iter().enumerate() {
+                    let want = mesh.intersect(r, 0.0, t_max16[l]);
+                    wrong16[i] += (bits(packed[l]) != bits(want)) as u32;
+                }
+            }
             for (l, r) in rays.iter().enumerate() {
                 let want = mesh.intersect(r, 0.0, t_max[l]);
                 hits += want.is_some() as u32;
@@ -1411,6 +1457,10 @@ mod tests {
         assert!(
             hits > 8000 && mixed > 200,
             "{hits} hits, {mixed} packets of mixed permutations"
+        );
+        assert!(
+            wrong16.iter().all(|&w| w == 0),
+            "lanes of packets of 16 with another hit than the single ray's, on {isas:?}: {wrong16:?}"
         );
     }
 }

@@ -28,7 +28,7 @@ impl WatertightRay {
     }
 
     /// Prepares `ray` (direction must be non-zero).
-    #[inline]
+    #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         let d = ray.direction;
         let a = d.abs();
