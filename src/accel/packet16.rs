@@ -74,8 +74,14 @@ struct Lanes {
     o_near: [[f32; LANES16]; 3],
     o_far: [[f32; LANES16]; 3],
     inv: [[f32; LANES16]; 3],
+    /// `o_near * inv` and `o_far * inv`, for the fused form of the
+    /// AVX-512 child test.
+    o_inv: [[[f32; LANES16]; 3]; 2],
     /// Row of each axis's near plane (common to all lanes).
     near: [usize; 3],
+    /// Whether every lane may use the fused form (as
+    /// [`NodeRay::fused`]).
+    fused: bool,
 }
 
 /// A pending subtree: child reference, lanes, smallest entry distance.
@@ -110,13 +116,18 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
         o_near: [[0.0; LANES16]; 3],
         o_far: [[0.0; LANES16]; 3],
         inv: [[0.0; LANES16]; 3],
+        o_inv: [[[0.0; LANES16]; 3]; 2],
         near: [0; 3],
+        fused: true,
     };
     let mut margin = [0.0f32; LANES16];
     let mut o = [[0.0f32; LANES16]; 3];
     let mut d = [[0.0f32; LANES16]; 3];
+    let mut o_mag = [0.0f32; LANES16];
+    let mut fused = true;
     for (l, r) in packet.rays.iter().enumerate() {
-        margin[l] = crate::accel::node::margin(r.origin.abs().max_element(), bvh.magnitude);
+        o_mag[l] = r.origin.abs().max_element();
+        margin[l] = crate::accel::node::margin(o_mag[l], bvh.magnitude);
         for a in 0..3 {
             o[a][l] = r.origin[a];
             d[a][l] = r.direction[a];
@@ -132,12 +143,18 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
             lanes.inv[a][l] = inv;
             lanes.o_near[a][l] = o[a][l] + shift;
             lanes.o_far[a][l] = o[a][l] - shift;
+            lanes.o_inv[0][a][l] = lanes.o_near[a][l] * inv;
+            lanes.o_inv[1][a][l] = lanes.o_far[a][l] * inv;
             down |= (inv.is_sign_negative() as LaneMask) << l;
+            // `NodeRay::fused`'s condition, for every lane.
+            let reach = bvh.magnitude + o_mag[l] + margin[l];
+            fused &= inv.abs() * reach < 1.0e30;
         }
         let down = down & alive;
         mixed |= down != 0 && down != alive;
         lanes.near[a] = a + 3 * ((down >> lead) & 1) as usize;
     }
+    lanes.fused = fused;
     if mixed {
         for_each_lane(
             alive,
@@ -318,6 +335,29 @@ unsafe fn test_child_avx512(
         use std::arch::x86_64::*;
         let mut enter: __m512 = std::mem::transmute(packet.t_min);
         let mut exit: __m512 = std::mem::transmute(packet.t_max);
+        if lanes.fused {
+            // As `NodeRay::test_fma`: one fused multiply-add per slab,
+            // `plane * inv - o * inv`. The distances round differently
+            // from the portable path's by far less than the margin, so
+            // the test stays conservative and the closest hits (which do
+            // not depend on the order of a mesh's leaves) are the same.
+            for a in 0..3 {
+                let n = lanes.near[a];
+                let near = _mm512_set1_ps(node.planes[n][c]);
+                let far = _mm512_set1_ps(node.planes[(n + 3) % 6][c]);
+                let inv: __m512 = std::mem::transmute(lanes.inv[a]);
+                let on: __m512 = std::mem::transmute(lanes.o_inv[0][a]);
+                let of: __m512 = std::mem::transmute(lanes.o_inv[1][a]);
+                enter = _mm512_max_ps(_mm512_fmsub_ps(near, inv, on), enter);
+                exit = _mm512_min_ps(_mm512_fmsub_ps(far, inv, of), exit);
+            }
+            let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(go as __mmask16, enter, exit);
+            if hit == 0 {
+                return (0, f32::INFINITY);
+            }
+            let e = _mm512_mask_blend_ps(hit, _mm512_set1_ps(f32::INFINITY), enter);
+            return (hit as LaneMask, _mm512_reduce_min_ps(e));
+        }
         for a in 0..3 {
             let n = lanes.near[a];
             let near = _mm512_set1_ps(node.planes[n][c]);
