@@ -19,6 +19,12 @@
 //! [`active`]: the CPU's features, detected once, unless a test or a
 //! benchmark [`force`]s one.
 //!
+//! A third path, [`Isa::Avx512`], is the AVX2 path everywhere except in
+//! the queries with 16-lane kernels (packets of 16,
+//! [`crate::accel::packet16`]), whose entry points
+//! ([`simd_entry_wide!`](crate::simd_entry_wide)) add one compiled with
+//! AVX-512F.
+//!
 //! Both paths perform the same IEEE operations in the same order (Rust
 //! never fuses a multiply and an add on its own, and the kernels use no
 //! fused operations), so they give bit-identical hits; the tests check

@@ -885,7 +885,7 @@ fn edges_lanes16(
         let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
         let negative = u < 0.0 || v < 0.0 || w < 0.0;
         let positive = u > 0.0 || v > 0.0 || w > 0.0;
-        lanes |= ((!clean || !(negative && positive)) as u32) << l;
+        lanes |= (!(clean && negative && positive) as u32) << l;
         e[0][l] = u;
         e[1][l] = v;
         e[2][l] = w;
