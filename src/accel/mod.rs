@@ -11,6 +11,7 @@ pub mod kdtree;
 pub mod mailbox;
 pub mod node;
 pub mod packet;
+pub mod packet16;
 pub mod simd;
 pub mod single;
 pub mod stream;

@@ -19,6 +19,12 @@
 //! [`active`]: the CPU's features, detected once, unless a test or a
 //! benchmark [`force`]s one.
 //!
+//! A third path, [`Isa::Avx512`], is the AVX2 path everywhere except in
+//! the queries with 16-lane kernels (packets of 16,
+//! [`crate::accel::packet16`]), whose entry points
+//! ([`simd_entry_wide!`](crate::simd_entry_wide)) add one compiled with
+//! AVX-512F.
+//!
 //! Both paths perform the same IEEE operations in the same order (Rust
 //! never fuses a multiply and an add on its own, and the kernels use no
 //! fused operations), so they give bit-identical hits; the tests check
@@ -37,6 +43,10 @@ pub enum Isa {
     Portable,
     /// AVX2 and FMA (x86-64).
     Avx2,
+    /// AVX-512F on top of AVX2 and FMA (x86-64): the AVX2 path everywhere,
+    /// and 16-lane registers in the queries that have a wider kernel
+    /// (packets of 16, [`crate::accel::packet16`]).
+    Avx512,
 }
 
 impl Isa {
@@ -45,6 +55,7 @@ impl Isa {
         match self {
             Isa::Portable => "portable",
             Isa::Avx2 => "avx2",
+            Isa::Avx512 => "avx512",
         }
     }
 }
@@ -56,6 +67,7 @@ fn encode(isa: Isa) -> u8 {
     match isa {
         Isa::Portable => 1,
         Isa::Avx2 => 2,
+        Isa::Avx512 => 3,
     }
 }
 
@@ -65,13 +77,15 @@ pub fn supported(isa: Isa) -> bool {
         Isa::Portable => true,
         #[cfg(target_arch = "x86_64")]
         Isa::Avx2 => is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"),
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx512 => supported(Isa::Avx2) && is_x86_feature_detected!("avx512f"),
         #[cfg(not(target_arch = "x86_64"))]
-        Isa::Avx2 => false,
+        Isa::Avx2 | Isa::Avx512 => false,
     }
 }
 
-/// Environment variable that overrides the choice of path: `portable` or
-/// `avx2` (the latter only where the CPU has it). For tools that cannot
+/// Environment variable that overrides the choice of path: `portable`,
+/// `avx2` or `avx512` (the last two only where the CPU has them). For tools that cannot
 /// run every AVX2 instruction the compiler emits: Valgrind 3.19 stops at a
 /// VEX `vmovq` between registers in the AVX2 entry points, so callgrind
 /// runs set `PRISM_ISA=portable` (and compare portable with portable).
@@ -83,12 +97,15 @@ pub fn detected() -> Isa {
         match v.as_str() {
             "portable" => return Isa::Portable,
             "avx2" if supported(Isa::Avx2) => return Isa::Avx2,
+            "avx512" if supported(Isa::Avx512) => return Isa::Avx512,
             _ => eprintln!(
-                "notice: {ISA_ENV}={v:?} ignored (expected \"portable\", or \"avx2\" on a CPU with AVX2 and FMA)"
+                "notice: {ISA_ENV}={v:?} ignored (expected \"portable\", \"avx2\" on a CPU with AVX2 and FMA, or \"avx512\" on one that also has AVX-512F)"
             ),
         }
     }
-    if supported(Isa::Avx2) {
+    if supported(Isa::Avx512) {
+        Isa::Avx512
+    } else if supported(Isa::Avx2) {
         Isa::Avx2
     } else {
         Isa::Portable
@@ -101,6 +118,7 @@ pub fn active() -> Isa {
     match CHOICE.load(Ordering::Relaxed) {
         1 => Isa::Portable,
         2 => Isa::Avx2,
+        3 => Isa::Avx512,
         _ => {
             let isa = detected();
             CHOICE.store(encode(isa), Ordering::Relaxed);
@@ -120,11 +138,20 @@ pub fn force(isa: Isa) -> bool {
     true
 }
 
-/// True when queries should take the AVX2 path.
+/// True when queries should take the AVX2 path (also under
+/// [`Isa::Avx512`], which adds to it).
 #[doc(hidden)]
 #[inline(always)]
 pub fn use_avx2() -> bool {
-    active() == Isa::Avx2
+    active() != Isa::Portable
+}
+
+/// True when the queries with a 16-lane kernel should take the AVX-512
+/// path.
+#[doc(hidden)]
+#[inline(always)]
+pub fn use_avx512() -> bool {
+    active() == Isa::Avx512
 }
 
 /// Defines a method `$name(&self, args) -> ret` that runs the
@@ -157,6 +184,48 @@ macro_rules! simd_entry {
                 }
             }
             self.$body::<false>($($arg),*)
+        }
+    };
+}
+
+/// [`simd_entry!`] for queries with a 16-lane kernel: `$body::<AVX,
+/// AVX512>` runs as `<true, true>` inside a function with AVX-512F, AVX2
+/// and FMA enabled ([`Isa::Avx512`]), `<true, false>` inside one with AVX2
+/// and FMA ([`Isa::Avx2`]), or `<false, false>`.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! simd_entry_wide {
+    (
+        $(#[$meta:meta])*
+        $vis:vis fn $name:ident(&self $(, $arg:ident : $ty:ty)* $(,)?) -> $ret:ty
+        => $self_ty:ty, $body:ident
+    ) => {
+        $(#[$meta])*
+        $vis fn $name(&self $(, $arg: $ty)*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f,avx2,fma")]
+                fn widest(this: &$self_ty $(, $arg: $ty)*) -> $ret {
+                    this.$body::<true, true>($($arg),*)
+                }
+                #[target_feature(enable = "avx2,fma")]
+                fn fast(this: &$self_ty $(, $arg: $ty)*) -> $ret {
+                    this.$body::<true, false>($($arg),*)
+                }
+                if $crate::accel::simd::use_avx512() {
+                    // SAFETY: `use_avx512` holds only on CPUs with
+                    // AVX-512F, AVX2 and FMA (`simd::supported`).
+                    #[allow(unsafe_code)]
+                    return unsafe { widest(self $(, $arg)*) };
+                }
+                if $crate::accel::simd::use_avx2() {
+                    // SAFETY: `use_avx2` holds only on CPUs with AVX2 and
+                    // FMA (`simd::supported`).
+                    #[allow(unsafe_code)]
+                    return unsafe { fast(self $(, $arg)*) };
+                }
+            }
+            self.$body::<false, false>($($arg),*)
         }
     };
 }

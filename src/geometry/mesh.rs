@@ -14,6 +14,7 @@ use crate::accel::bvh8::Bvh8;
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;
 use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
+use crate::accel::packet16::{LANES16, Packet16};
 use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
@@ -27,7 +28,7 @@ pub const LEAF_TRIANGLES: u32 = 8;
 
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
-use crate::geometry::triangle::{LeafFrame, Tri4};
+use crate::geometry::triangle::{LeafFrame, Shears16, Tri4};
 
 /// A packet's leaf visit by at least this many lanes that share an origin
 /// and permutation computes the leaf's [`LeafFrame`] once for them.
@@ -676,6 +677,125 @@ impl Mesh {
         );
     }
 
+    /// [`Self::intersect_packet_kernel`] for packets of 16
+    /// ([`crate::accel::packet16`]). Lanes that share an origin and
+    /// permutation with the packet's first (a pinhole's camera rays) test
+    /// a leaf together, triangle by triangle across the lanes
+    /// ([`WatertightRay::intersect8_lanes16`]); the others lane by lane.
+    /// Either way each lane gets the hit [`Self::intersect`] gives it.
+    #[inline(always)]
+    pub(crate) fn intersect_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        packet: &mut Packet16,
+        lanes: LaneMask,
+        best: &mut [Option<MeshHit>; LANES16],
+    ) {
+        let lanes = lanes & packet.valid;
+        if !matches!(self.structure, Structure::Bvh) {
+            for_each_lane(
+                lanes,
+                #[inline(always)]
+                |l| {
+                    if let Some(h) = self.intersect_kernel::<AVX>(
+                        &packet.rays[l],
+                        packet.t_min[l],
+                        packet.t_max[l],
+                    ) {
+                        packet.t_max[l] = h.t;
+                        best[l] = Some(h);
+                    }
+                },
+            );
+            return;
+        }
+        if lanes == 0 {
+            return;
+        }
+        // (A loop rather than `std::array::from_fn`, whose closure is not
+        // inlined into the entry point.)
+        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES16];
+        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+            *w = WatertightRay::new(r);
+        }
+        let lead = lanes.trailing_zeros() as usize;
+        let mut shared = 0;
+        for (l, w) in wt.iter().enumerate() {
+            shared |= (w.shares_frame(&wt[lead]) as LaneMask) << l;
+        }
+        let shared = shared & lanes;
+        let shears = Shears16::new(&wt);
+        crate::accel::packet16::traverse16::<AVX, AVX512>(
+            &self.bvh,
+            packet,
+            lanes,
+            #[inline(always)]
+            |p, hit, leaf| {
+                let framed = hit & shared;
+                let hit = if framed.count_ones() >= FRAME_LANES {
+                    let lo = &self.blocks[2 * leaf as usize];
+                    let hi = &self.blocks[2 * leaf as usize + 1];
+                    let count = lo.count + hi.count;
+                    let frame = wt[lead].frame8::<AVX>([lo, hi], count);
+                    // Each lane searches up to its reach (one ulp past a
+                    // known hit, so an equal `t` can win on index), then
+                    // its leaf hit must win against what it had.
+                    let mut reach = p.t_max;
+                    for_each_lane(
+                        framed,
+                        #[inline(always)]
+                        |l| reach[l] = Self::reach(p.t_max[l], &best[l]),
+                    );
+                    let mut out = [(0, 0.0, 0.0, 0.0); LANES16];
+                    let found = WatertightRay::intersect8_lanes16::<AVX512>(
+                        &wt,
+                        &shears,
+                        &frame,
+                        [lo, hi],
+                        count,
+                        framed,
+                        &p.t_min,
+                        &mut reach,
+                        &mut out,
+                    );
+                    for_each_lane(
+                        found,
+                        #[inline(always)]
+                        |l| {
+                            let (lane, t, b1, b2) = out[l];
+                            let h = MeshHit {
+                                t,
+                                triangle: lo.first + lane,
+                                b1,
+                                b2,
+                            };
+                            if self.wins(h.t, h.triangle, &best[l]) {
+                                p.t_max[l] = h.t;
+                                best[l] = Some(h);
+                            }
+                        },
+                    );
+                    hit & !framed
+                } else {
+                    hit
+                };
+                for_each_lane(
+                    hit,
+                    #[inline(always)]
+                    |l| {
+                        let reach = Self::reach(p.t_max[l], &best[l]);
+                        if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
+                            && self.wins(h.t, h.triangle, &best[l])
+                        {
+                            p.t_max[l] = h.t;
+                            best[l] = Some(h);
+                        }
+                    },
+                );
+                0
+            },
+        );
+    }
+
     /// The lanes of `packet` in `lanes` that hit any triangle within their
     /// intervals; each lane stops at its first blocker.
     #[inline(always)]
@@ -820,6 +940,21 @@ impl Mesh {
             lanes: LaneMask,
             best: &mut [Option<MeshHit>; LANES],
         ) -> () => Mesh, intersect_packet_kernel
+    }
+
+    crate::simd_entry_wide! {
+        /// Closest hits for the lanes of a packet of 16 (rays in object
+        /// space), by packet traversal ([`crate::accel::packet16`]): as
+        /// [`Self::intersect_packet`], `best[l]` is replaced when lane `l`
+        /// finds a nearer hit than `packet.t_max[l]`, which is shrunk to
+        /// it. Each lane gets the hit [`Self::intersect`] gives it, bit
+        /// for bit, on every SIMD path.
+        pub fn intersect_packet16(
+            &self,
+            packet: &mut Packet16,
+            lanes: LaneMask,
+            best: &mut [Option<MeshHit>; LANES16],
+        ) -> () => Mesh, intersect_packet16_kernel
     }
 
     crate::simd_entry! {
@@ -1173,6 +1308,22 @@ mod tests {
                 assert_eq!(mesh.occluded(r, 0.0, f32::INFINITY), want.is_some());
             }
         }
+        for (k, chunk) in rays.chunks(LANES16).enumerate() {
+            let n = chunk.len();
+            let mut packet = Packet16::new(chunk, &vec![0.0; n], &vec![f32::INFINITY; n]);
+            let mut packed = [None; LANES16];
+            let lanes = packet.valid;
+            mesh.intersect_packet16(&mut packet, lanes, &mut packed);
+            for (l, r) in chunk.iter().enumerate() {
+                let want = mesh.intersect_brute_force(r, 0.0, f32::INFINITY);
+                assert_eq!(
+                    packed[l].map(|h| h.t),
+                    want.map(|h| h.t),
+                    "packet16 ray {}",
+                    k * LANES16 + l
+                );
+            }
+        }
         assert!(hits > 50, "only {hits} of the rays hit the soup");
     }
 
@@ -1184,8 +1335,18 @@ mod tests {
     /// and inside its triangles, fanned around the diagonal between two
     /// axes so that lanes of one packet have different permutations; some
     /// packets have a lane from another origin, some finite intervals.
+    /// Packets of 16 ([`Mesh::intersect_packet16`], lane-major leaf tests)
+    /// are checked on every SIMD path this CPU has.
     #[test]
     fn camera_packets_give_single_ray_hits_bit_for_bit() {
+        use crate::accel::simd::{self, Isa};
+        let isas: Vec<Isa> = [Isa::Portable, Isa::Avx2, Isa::Avx512]
+            .into_iter()
+            .filter(|&i| simd::supported(i))
+            .collect();
+        // Lanes of packets of 16 whose hit differs from the single ray's,
+        // per path.
+        let mut wrong16 = vec![0u32; isas.len()];
         let mut s = 21u64;
         let mut next = || {
             s = s
@@ -1244,7 +1405,7 @@ mod tests {
                 })
                 .unwrap();
             let tri = mesh.triangle(pick);
-            let rays: Vec<Ray> = (0..LANES)
+            let rays16: Vec<Ray> = (0..LANES16)
                 .map(|l| {
                     let target = match (k as usize + l) % 3 {
                         0 => tri[l % 3],
@@ -1266,12 +1427,13 @@ mod tests {
                     Ray::new(o, target - o)
                 })
                 .collect();
+            let rays = &rays16[..LANES];
             let perms: Vec<_> = rays
                 .iter()
                 .map(|r| WatertightRay::new(r).permutation())
                 .collect();
             mixed += perms.iter().any(|p| *p != perms[0]) as u32;
-            let t_max: Vec<f32> = (0..LANES)
+            let t_max16: Vec<f32> = (0..LANES16)
                 .map(|_| {
                     if k % 3 == 0 {
                         0.5 + 3.0 * next()
@@ -1280,11 +1442,27 @@ mod tests {
                     }
                 })
                 .collect();
-            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let t_max = &t_max16[..LANES];
+            let mut packet = Packet::new(rays, &[0.0; LANES], t_max);
             let mut packed = [None; LANES];
             mesh.intersect_packet(&mut packet, ALL, &mut packed);
-            let mut packet = Packet::new(&rays, &[0.0; LANES], &t_max);
+            let mut packet = Packet::new(rays, &[0.0; LANES], t_max);
             let blocked = mesh.occluded_packet(&mut packet, ALL);
+            for (i, &isa) in isas.iter().enumerate() {
+                assert!(simd::force(isa));
+                let mut packet = Packet16::new(&rays16, &[0.0; LANES16], &t_max16);
+                let mut packed = [None; LANES16];
+                mesh.intersect_packet16(
+                    &mut packet,
+                    crate::accel::packet16::ALL_LANES16,
+                    &mut packed,
+                );
+                simd::force(simd::detected());
+                for (l, r) in rays16.iter().enumerate() {
+                    let want = mesh.intersect(r, 0.0, t_max16[l]);
+                    wrong16[i] += (bits(packed[l]) != bits(want)) as u32;
+                }
+            }
             for (l, r) in rays.iter().enumerate() {
                 let want = mesh.intersect(r, 0.0, t_max[l]);
                 hits += want.is_some() as u32;
@@ -1299,6 +1477,10 @@ mod tests {
         assert!(
             hits > 8000 && mixed > 200,
             "{hits} hits, {mixed} packets of mixed permutations"
+        );
+        assert!(
+            wrong16.iter().all(|&w| w == 0),
+            "lanes of packets of 16 with another hit than the single ray's, on {isas:?}: {wrong16:?}"
         );
     }
 }

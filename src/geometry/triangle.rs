@@ -28,7 +28,7 @@ impl WatertightRay {
     }
 
     /// Prepares `ray` (direction must be non-zero).
-    #[inline]
+    #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
         let d = ray.direction;
         let a = d.abs();
@@ -496,28 +496,41 @@ impl WatertightRay {
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let (u, v, w) = (e[0][l], e[1][l], e[2][l]);
+            let uvw = [e[0][l], e[1][l], e[2][l]];
             let b = [bound[0][l], bound[1][l], bound[2][l]];
-            let [p0, p1, p2] = corners(l);
-            let hit = if !(u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2]) {
-                self.intersect_careful([p0, p1, p2], [u, v, w], b, t_min, *t_max)
-            } else {
-                let det = u + v + w;
-                if det == 0.0 || !det.is_finite() {
-                    continue;
-                }
-                let Some(t) = self.plane_t_within(p0, p1, p2, t_min, *t_max) else {
-                    continue;
-                };
-                let inv = 1.0 / det;
-                Some((t, v * inv, w * inv))
-            };
-            if let Some((t, b1, b2)) = hit {
+            if let Some((t, b1, b2)) = self.finish_one(corners(l), uvw, b, t_min, *t_max) {
                 *t_max = t;
                 best = Some((l as u32, t, b1, b2));
             }
         }
         best
+    }
+
+    /// The end of the test of one triangle `p` whose edge test passed or
+    /// needs the re-check, from its edge functions `uvw` and their
+    /// rounding bounds `b`: `(t, b1, b2)` for a hit inside `(t_min,
+    /// t_max)`. Shared by the lane-by-lane and the lane-major leaf tests.
+    #[inline(always)]
+    fn finish_one(
+        &self,
+        p: [Vec3A; 3],
+        uvw: [f32; 3],
+        b: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let [u, v, w] = uvw;
+        let [p0, p1, p2] = p;
+        if !(u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2]) {
+            return self.intersect_careful(p, uvw, b, t_min, t_max);
+        }
+        let det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let t = self.plane_t_within(p0, p1, p2, t_min, t_max)?;
+        let inv = 1.0 / det;
+        Some((t, v * inv, w * inv))
     }
 }
 
@@ -746,6 +759,201 @@ impl WatertightRay {
             let b2 = _mm256_mul_ps(tm(2), _mm256_add_ps(sa, sb));
             edge_lanes8_avx2([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
         }
+    }
+}
+
+/// The shears of up to 16 rays lane by lane, for the lane-major leaf
+/// test [`WatertightRay::intersect8_lanes16`].
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct Shears16 {
+    sx: [f32; 16],
+    sy: [f32; 16],
+}
+
+impl Shears16 {
+    /// The shears of `rays`.
+    #[inline(always)]
+    pub fn new(rays: &[WatertightRay; 16]) -> Self {
+        let mut s = Shears16 {
+            sx: [0.0; 16],
+            sy: [0.0; 16],
+        };
+        for (l, r) in rays.iter().enumerate() {
+            s.sx[l] = r.shear.x;
+            s.sy[l] = r.shear.y;
+        }
+        s
+    }
+}
+
+impl WatertightRay {
+    /// The leaf test of [`Self::intersect8_framed`] for the lanes of
+    /// `lanes` at once, triangle by triangle: each of the leaf's `count`
+    /// triangles is tested against every lane side by side (16 lanes in
+    /// one register on the AVX-512 path), and the lanes whose edge test
+    /// passes or needs the re-check finish it one by one. All rays in
+    /// `lanes` must [`Self::shares_frame`] with the one that made `frame`.
+    ///
+    /// Every lane computes exactly the operations of
+    /// [`Self::intersect8_framed`] and meets the leaf's triangles in the
+    /// same order, a later one winning only when strictly nearer, so the
+    /// result is that of testing the lanes one at a time, bit for bit:
+    /// for each lane `l` that hits, `t_max[l]` shrinks to the hit and
+    /// `out[l]` holds `(triangle, t, b1, b2)`. Returns the lanes that hit.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn intersect8_lanes16<const AVX512: bool>(
+        rays: &[WatertightRay; 16],
+        shears: &Shears16,
+        frame: &LeafFrame,
+        blocks: [&Tri4; 2],
+        count: u32,
+        lanes: u32,
+        t_min: &[f32; 16],
+        t_max: &mut [f32; 16],
+        out: &mut [(u32, f32, f32, f32); 16],
+    ) -> u32 {
+        let mut found = 0;
+        for j in 0..count as usize {
+            let r: [[f32; 3]; 3] =
+                std::array::from_fn(|vi| std::array::from_fn(|a| frame.r[vi][a][j]));
+            let tm = [frame.tm[0][j], frame.tm[1][j], frame.tm[2][j]];
+            #[cfg(target_arch = "x86_64")]
+            let (pass, e, b) = if AVX512 {
+                // SAFETY: `AVX512` is set only by the AVX-512 entry points,
+                // which run only on CPUs with AVX-512F (`simd::use_avx512`).
+                #[allow(unsafe_code)]
+                unsafe {
+                    edges_lanes16_avx512(shears, &r, &tm)
+                }
+            } else {
+                edges_lanes16(shears, &r, &tm)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let (pass, e, b) = edges_lanes16(shears, &r, &tm);
+            let mut pass = pass & lanes;
+            if pass == 0 {
+                continue;
+            }
+            let corners = blocks[j / 4].corners(j % 4);
+            while pass != 0 {
+                let l = pass.trailing_zeros() as usize;
+                pass &= pass - 1;
+                let uvw = [e[0][l], e[1][l], e[2][l]];
+                let bl = [b[0][l], b[1][l], b[2][l]];
+                if let Some((t, b1, b2)) = rays[l].finish_one(corners, uvw, bl, t_min[l], t_max[l])
+                {
+                    t_max[l] = t;
+                    out[l] = (j as u32, t, b1, b2);
+                    found |= 1 << l;
+                }
+            }
+        }
+        found
+    }
+}
+
+/// One triangle, given as its vertices minus the shared origin along the
+/// permuted axes (`r[vertex][axis]`) and its bound factors `tm` (as in a
+/// [`LeafFrame`]), against 16 rays' shears: the lanes whose edge test
+/// passed or needs the re-check, the edge functions and their bounds.
+/// The operations of the framed test, lane by lane.
+#[inline(always)]
+fn edges_lanes16(
+    shears: &Shears16,
+    r: &[[f32; 3]; 3],
+    tm: &[f32; 3],
+) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+    let mut e = [[0.0f32; 16]; 3];
+    let mut bound = [[0.0f32; 16]; 3];
+    let mut lanes = 0;
+    for l in 0..16 {
+        let (sx, sy) = (shears.sx[l], shears.sy[l]);
+        let vertex = |vi: usize| {
+            let x = r[vi][0] - sx * r[vi][2];
+            let y = r[vi][1] - sy * r[vi][2];
+            (x, y, x.abs() + y.abs())
+        };
+        let (ax, ay, sa) = vertex(0);
+        let (bx, by, sb) = vertex(1);
+        let (cx, cy, sc) = vertex(2);
+        let b = [tm[0] * (sb + sc), tm[1] * (sc + sa), tm[2] * (sa + sb)];
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
+        let negative = u < 0.0 || v < 0.0 || w < 0.0;
+        let positive = u > 0.0 || v > 0.0 || w > 0.0;
+        lanes |= (!(clean && negative && positive) as u32) << l;
+        e[0][l] = u;
+        e[1][l] = v;
+        e[2][l] = w;
+        for k in 0..3 {
+            bound[k][l] = b[k];
+        }
+    }
+    (lanes, e, bound)
+}
+
+/// [`edges_lanes16`] in 16-wide AVX-512 registers: the same operations.
+///
+/// # Safety
+/// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point (see
+/// [`crate::accel::simd`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn edges_lanes16_avx512(
+    shears: &Shears16,
+    r: &[[f32; 3]; 3],
+    tm: &[f32; 3],
+) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+    // SAFETY: the caller runs on a CPU with AVX-512F.
+    unsafe {
+        use std::arch::x86_64::*;
+        let sx: __m512 = std::mem::transmute(shears.sx);
+        let sy: __m512 = std::mem::transmute(shears.sy);
+        let abs = {
+            #[inline(always)]
+            |x: __m512| _mm512_abs_ps(x)
+        };
+        let vertex = {
+            #[inline(always)]
+            |vi: usize| {
+                let rz = _mm512_set1_ps(r[vi][2]);
+                let x = _mm512_sub_ps(_mm512_set1_ps(r[vi][0]), _mm512_mul_ps(sx, rz));
+                let y = _mm512_sub_ps(_mm512_set1_ps(r[vi][1]), _mm512_mul_ps(sy, rz));
+                (x, y, _mm512_add_ps(abs(x), abs(y)))
+            }
+        };
+        let (ax, ay, sa) = vertex(0);
+        let (bx, by, sb) = vertex(1);
+        let (cx, cy, sc) = vertex(2);
+        let b0 = _mm512_mul_ps(_mm512_set1_ps(tm[0]), _mm512_add_ps(sb, sc));
+        let b1 = _mm512_mul_ps(_mm512_set1_ps(tm[1]), _mm512_add_ps(sc, sa));
+        let b2 = _mm512_mul_ps(_mm512_set1_ps(tm[2]), _mm512_add_ps(sa, sb));
+        let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+        let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+        let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+        let gt = {
+            #[inline(always)]
+            |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, b)
+        };
+        let lt = {
+            #[inline(always)]
+            |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b)
+        };
+        let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
+        let zero = _mm512_setzero_ps();
+        let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
+        let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
+        let lanes = (!clean | !(negative & positive)) as u32;
+        (
+            lanes,
+            [u, v, w].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
+            [b0, b1, b2].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
+        )
     }
 }
 

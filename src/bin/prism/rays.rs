@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use prism::accel::packet::{LANES, Packet};
+use prism::accel::packet16::{LANES16, Packet16};
 use prism::accel::simd;
 use prism::accel::stream::Stream;
 use prism::core::error::{Error, Result};
@@ -46,7 +47,7 @@ pub struct RaysArgs {
     #[arg(long, value_enum, default_value_t = crate::args::AccelArg::Bvh)]
     pub accel: crate::args::AccelArg,
     /// Traversal modes to measure (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Mode::Single, Mode::Packet8, Mode::Stream])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Mode::Single, Mode::Packet8, Mode::Packet16, Mode::Stream])]
     pub modes: Vec<Mode>,
     /// Ray sets to measure (comma-separated).
     #[arg(long, value_delimiter = ',', default_values_t = [String::from("primary"), String::from("incoherent")], value_parser = ["primary", "incoherent"])]
@@ -66,6 +67,9 @@ pub enum Mode {
     Single,
     /// Packets of 8 consecutive rays.
     Packet8,
+    /// Packets of 16 consecutive rays (one register per quantity on the
+    /// AVX-512 path).
+    Packet16,
     /// Streams of 256 consecutive rays.
     Stream,
 }
@@ -75,6 +79,7 @@ impl Mode {
         match self {
             Mode::Single => "single",
             Mode::Packet8 => "packet8",
+            Mode::Packet16 => "packet16",
             Mode::Stream => "stream",
         }
     }
@@ -93,6 +98,8 @@ pub enum IsaArg {
     Portable,
     /// AVX2 and FMA.
     Avx2,
+    /// AVX-512F, AVX2 and FMA.
+    Avx512,
 }
 
 /// One traversal mode on one ray set.
@@ -100,7 +107,7 @@ pub enum IsaArg {
 pub struct ModeResult {
     /// `primary` or `incoherent`.
     pub rays: &'static str,
-    /// `single`, `packet8` or `stream`.
+    /// `single`, `packet8`, `packet16` or `stream`.
     pub mode: &'static str,
     /// Threads.
     pub threads: usize,
@@ -278,6 +285,22 @@ fn trace(mesh: &Mesh, set: &RaySet, mode: Mode, out: &mut [Option<MeshHit>]) {
                 o.copy_from_slice(&best[..n]);
             }
         }),
+        Mode::Packet16 => chunks.for_each(|(c, out)| {
+            let base = c * CHUNK;
+            for (p, o) in out.chunks_mut(LANES16).enumerate() {
+                let i = base + p * LANES16;
+                let n = o.len();
+                let mut packet = Packet16::new(
+                    &set.rays[i..i + n],
+                    &set.t_min[i..i + n],
+                    &set.t_max[i..i + n],
+                );
+                let mut best = [None; LANES16];
+                let lanes = packet.valid;
+                mesh.intersect_packet16(&mut packet, lanes, &mut best);
+                o.copy_from_slice(&best[..n]);
+            }
+        }),
         Mode::Stream => chunks.for_each_init(
             || (Stream::default(), Vec::new(), Vec::new()),
             |(stream, wt, best), (c, out)| {
@@ -336,6 +359,12 @@ pub fn run(args: RaysArgs) -> Result<()> {
             return Err(Error::Invalid("this CPU has no AVX2 and FMA".into()));
         }
         Some(IsaArg::Avx2) => {}
+        Some(IsaArg::Avx512) if !simd::force(simd::Isa::Avx512) => {
+            return Err(Error::Invalid(
+                "this CPU has no AVX-512F, AVX2 and FMA".into(),
+            ));
+        }
+        Some(IsaArg::Avx512) => {}
         None => {}
     }
     let threads: Vec<usize> = if args.threads.is_empty() {

@@ -1,0 +1,418 @@
+//! Packet traversal of a [`Bvh8`] with 16 lanes: the camera rays of a
+//! 4x4 pixel block visit the tree together.
+//!
+//! The same traversal as [`crate::accel::packet`] (nearest child first by
+//! the smallest entry distance of its lanes, stale subtrees skipped per
+//! lane, lanes that diverge finishing alone by single-ray traversal, mixed
+//! octants traced ray by ray), twice as wide: on the AVX-512 path one
+//! child's test of all 16 lanes is one register per quantity, so the
+//! packet's node work is shared by twice as many rays. The portable and
+//! AVX2 paths run the same operations lane by lane (plain loops the
+//! compiler widens). The AVX-512 path computes the slab distances with
+//! fused multiply-adds (as [`NodeRay::test_fused`]), which round
+//! differently by far less than the margin: the test stays conservative,
+//! and since a mesh's closest hit does not depend on the order in which
+//! its leaves are visited, every path gives the same hits.
+
+use std::mem::MaybeUninit;
+
+use glam::Vec3A;
+
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
+use crate::accel::node::{NodeRay, max_keep, min_keep};
+use crate::accel::packet::{LaneMask, for_each_lane};
+use crate::accel::single::traverse_from;
+use crate::core::math::Ray;
+
+/// Rays per packet.
+pub const LANES16: usize = 16;
+
+/// Every lane of a full packet.
+pub const ALL_LANES16: LaneMask = (1 << LANES16) - 1;
+
+/// A packet that has shrunk to this many lanes continues ray by ray.
+const DIVERGED: u32 = 2;
+
+/// Rays with their search intervals, lane by lane (as
+/// [`crate::accel::packet::Packet`], with 16 lanes).
+#[derive(Clone, Copy, Debug)]
+pub struct Packet16 {
+    /// Interval starts.
+    pub t_min: [f32; LANES16],
+    /// Interval ends; closest-hit traversal shrinks them as hits are found.
+    pub t_max: [f32; LANES16],
+    /// The rays themselves.
+    pub rays: [Ray; LANES16],
+    /// Lanes holding a ray.
+    pub valid: LaneMask,
+}
+
+impl Packet16 {
+    /// Packs up to [`LANES16`] rays with their intervals.
+    pub fn new(rays: &[Ray], t_min: &[f32], t_max: &[f32]) -> Self {
+        debug_assert!(
+            rays.len() <= LANES16 && rays.len() == t_min.len() && rays.len() == t_max.len()
+        );
+        let empty = Ray::new(Vec3A::ZERO, Vec3A::X);
+        let mut p = Packet16 {
+            t_min: [0.0; LANES16],
+            // Unused lanes can never hit.
+            t_max: [f32::NEG_INFINITY; LANES16],
+            rays: [empty; LANES16],
+            valid: 0,
+        };
+        for (l, r) in rays.iter().enumerate() {
+            p.t_min[l] = t_min[l];
+            p.t_max[l] = t_max[l];
+            p.rays[l] = *r;
+            p.valid |= 1 << l;
+        }
+        p
+    }
+}
+
+/// The lanes of a packet prepared for one tree, axis by axis.
+#[repr(C, align(64))]
+struct Lanes {
+    o_near: [[f32; LANES16]; 3],
+    o_far: [[f32; LANES16]; 3],
+    inv: [[f32; LANES16]; 3],
+    /// `o_near * inv` and `o_far * inv`, for the fused form of the
+    /// AVX-512 child test.
+    o_inv: [[[f32; LANES16]; 3]; 2],
+    /// Row of each axis's near plane (common to all lanes).
+    near: [usize; 3],
+    /// Whether every lane may use the fused form (as
+    /// [`NodeRay::fused`]).
+    fused: bool,
+}
+
+/// A pending subtree: child reference, lanes, smallest entry distance.
+type Pending = (u32, LaneMask, f32);
+
+/// Pending subtrees held without allocating.
+const FIXED: usize = 48;
+
+/// Visits every leaf whose box some lane's interval reaches, calling
+/// `leaf(packet, lanes, leaf)` with the lanes that reach it, exactly as
+/// [`crate::accel::packet::traverse`] does for 8 lanes: `leaf` shrinks
+/// `packet.t_max` of the lanes it hits (closest hit) or returns the lanes
+/// found blocked, which retires them. `AVX` selects the AVX2 code of the
+/// single-ray fallback and `AVX512` the 16-wide child test (each only
+/// valid on a CPU that has it, see [`crate::accel::simd`]).
+#[inline(always)]
+pub fn traverse16<const AVX: bool, const AVX512: bool>(
+    bvh: &Bvh8,
+    packet: &mut Packet16,
+    active: LaneMask,
+    mut leaf: impl FnMut(&mut Packet16, LaneMask, u32) -> LaneMask,
+) {
+    let mut alive = active & packet.valid;
+    if bvh.nodes.is_empty() || alive == 0 {
+        return;
+    }
+    // The lanes prepared as `NodeRay::new` prepares a ray, in loops over
+    // the lanes that the compiler widens (one division per axis for the
+    // whole packet on the AVX-512 path). Lanes that diverge later prepare
+    // their own `NodeRay`: the same values.
+    let mut lanes = Lanes {
+        o_near: [[0.0; LANES16]; 3],
+        o_far: [[0.0; LANES16]; 3],
+        inv: [[0.0; LANES16]; 3],
+        o_inv: [[[0.0; LANES16]; 3]; 2],
+        near: [0; 3],
+        fused: true,
+    };
+    let mut margin = [0.0f32; LANES16];
+    let mut o = [[0.0f32; LANES16]; 3];
+    let mut d = [[0.0f32; LANES16]; 3];
+    let mut o_mag = [0.0f32; LANES16];
+    let mut fused = true;
+    for (l, r) in packet.rays.iter().enumerate() {
+        o_mag[l] = r.origin.abs().max_element();
+        margin[l] = crate::accel::node::margin(o_mag[l], bvh.magnitude);
+        for a in 0..3 {
+            o[a][l] = r.origin[a];
+            d[a][l] = r.direction[a];
+        }
+    }
+    let lead = alive.trailing_zeros() as usize;
+    let mut mixed = false;
+    for a in 0..3 {
+        let mut down: LaneMask = 0;
+        for l in 0..LANES16 {
+            let inv = 1.0 / d[a][l];
+            let shift = margin[l].copysign(inv);
+            lanes.inv[a][l] = inv;
+            lanes.o_near[a][l] = o[a][l] + shift;
+            lanes.o_far[a][l] = o[a][l] - shift;
+            lanes.o_inv[0][a][l] = lanes.o_near[a][l] * inv;
+            lanes.o_inv[1][a][l] = lanes.o_far[a][l] * inv;
+            down |= (inv.is_sign_negative() as LaneMask) << l;
+            // `NodeRay::fused`'s condition, for every lane.
+            let reach = bvh.magnitude + o_mag[l] + margin[l];
+            fused &= inv.abs() * reach < 1.0e30;
+        }
+        let down = down & alive;
+        mixed |= down != 0 && down != alive;
+        lanes.near[a] = a + 3 * ((down >> lead) & 1) as usize;
+    }
+    lanes.fused = fused;
+    if mixed {
+        for_each_lane(
+            alive,
+            #[inline(always)]
+            |l| {
+                let ray = NodeRay::new(&packet.rays[l], bvh);
+                single_lane::<AVX>(bvh, 0, &ray, packet, l, &mut leaf);
+            },
+        );
+        return;
+    }
+    let mut fixed = [const { MaybeUninit::<Pending>::uninit() }; FIXED];
+    let mut top = 0;
+    let mut spill: Vec<Pending> = Vec::new();
+    fixed[0].write((0, alive, f32::NEG_INFINITY));
+    top += 1;
+    loop {
+        let (cur, lanes_in, near) = if let Some(e) = spill.pop() {
+            e
+        } else if top > 0 {
+            top -= 1;
+            // SAFETY: entries below `top` were written (`top` only grows
+            // after a write).
+            #[allow(unsafe_code)]
+            unsafe {
+                fixed[top].assume_init()
+            }
+        } else {
+            break;
+        };
+        // Lanes still alive whose closest hit is not nearer than the node.
+        let go = not_beyond::<AVX512>(near, &packet.t_max) & lanes_in & alive;
+        if go == 0 {
+            continue;
+        }
+        if cur & LEAF != 0 {
+            alive &= !leaf(packet, go, cur & !LEAF);
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        if go.count_ones() <= DIVERGED {
+            for_each_lane(
+                go,
+                #[inline(always)]
+                |l| {
+                    let ray = NodeRay::new(&packet.rays[l], bvh);
+                    if single_lane::<AVX>(bvh, cur, &ray, packet, l, &mut leaf) {
+                        alive &= !(1 << l);
+                    }
+                },
+            );
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        let node: &Node8 = &bvh.nodes[cur as usize];
+        let mut found: [Pending; WIDTH] = [(0, 0, 0.0); WIDTH];
+        let mut n = 0;
+        for c in 0..WIDTH {
+            let child = node.child[c];
+            if child == EMPTY {
+                break;
+            }
+            let (hit, t) = test_child::<AVX512>(&lanes, node, c, packet, go);
+            if hit == 0 {
+                continue;
+            }
+            // Insertion, far to near.
+            let mut j = n;
+            while j > 0 && found[j - 1].2 < t {
+                found[j] = found[j - 1];
+                j -= 1;
+            }
+            found[j] = (child, hit, t);
+            n += 1;
+        }
+        for &e in &found[..n] {
+            if e.0 & LEAF == 0 {
+                crate::accel::single::prefetch_bytes(
+                    &bvh.nodes[e.0 as usize],
+                    std::mem::size_of::<Node8>(),
+                );
+            }
+            if top < FIXED {
+                fixed[top].write(e);
+                top += 1;
+            } else {
+                spill.push(e);
+            }
+        }
+    }
+}
+
+/// The lanes whose `t_max` is at least `near`.
+#[inline(always)]
+fn not_beyond<const AVX512: bool>(near: f32, t_max: &[f32; LANES16]) -> LaneMask {
+    #[cfg(target_arch = "x86_64")]
+    if AVX512 {
+        // SAFETY: `AVX512` is set only by the AVX-512 entry points, which
+        // run only on CPUs with AVX-512F (`simd::use_avx512`).
+        #[allow(unsafe_code)]
+        unsafe {
+            use std::arch::x86_64::*;
+            let t: __m512 = std::mem::transmute(*t_max);
+            return _mm512_cmp_ps_mask::<_CMP_LE_OQ>(_mm512_set1_ps(near), t) as LaneMask;
+        }
+    }
+    let mut go = 0;
+    for (l, &t) in t_max.iter().enumerate() {
+        go |= ((near <= t) as LaneMask) << l;
+    }
+    go
+}
+
+/// Child `c` of `node` against the lanes: the lanes in `go` that enter
+/// it, and their smallest entry distance. The operations of
+/// [`NodeRay::test`] lane by lane.
+#[inline(always)]
+fn test_child<const AVX512: bool>(
+    lanes: &Lanes,
+    node: &Node8,
+    c: usize,
+    packet: &Packet16,
+    go: LaneMask,
+) -> (LaneMask, f32) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX512 {
+        // SAFETY: `AVX512` is set only by the AVX-512 entry points, which
+        // run only on CPUs with AVX-512F (`simd::use_avx512`).
+        #[allow(unsafe_code)]
+        return unsafe { test_child_avx512(lanes, node, c, packet, go) };
+    }
+    let mut enter = packet.t_min;
+    let mut exit = packet.t_max;
+    for a in 0..3 {
+        let n = lanes.near[a];
+        let near = node.planes[n][c];
+        let far = node.planes[(n + 3) % 6][c];
+        for l in 0..LANES16 {
+            enter[l] = max_keep((near - lanes.o_near[a][l]) * lanes.inv[a][l], enter[l]);
+            exit[l] = min_keep((far - lanes.o_far[a][l]) * lanes.inv[a][l], exit[l]);
+        }
+    }
+    let mut hit = 0;
+    for l in 0..LANES16 {
+        hit |= ((enter[l] <= exit[l]) as LaneMask) << l;
+    }
+    let hit = hit & go;
+    let mut t = f32::INFINITY;
+    for_each_lane(
+        hit,
+        #[inline(always)]
+        |l| t = min_keep(enter[l], t),
+    );
+    (hit, t)
+}
+
+/// [`test_child`] in one 16-wide AVX-512 register.
+///
+/// # Safety
+/// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point (see
+/// [`crate::accel::simd`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn test_child_avx512(
+    lanes: &Lanes,
+    node: &Node8,
+    c: usize,
+    packet: &Packet16,
+    go: LaneMask,
+) -> (LaneMask, f32) {
+    // SAFETY: the caller runs on a CPU with AVX-512F.
+    unsafe {
+        use std::arch::x86_64::*;
+        let mut enter: __m512 = std::mem::transmute(packet.t_min);
+        let mut exit: __m512 = std::mem::transmute(packet.t_max);
+        if lanes.fused {
+            // As `NodeRay::test_fma`: one fused multiply-add per slab,
+            // `plane * inv - o * inv`. The distances round differently
+            // from the portable path's by far less than the margin, so
+            // the test stays conservative and the closest hits (which do
+            // not depend on the order of a mesh's leaves) are the same.
+            for a in 0..3 {
+                let n = lanes.near[a];
+                let near = _mm512_set1_ps(node.planes[n][c]);
+                let far = _mm512_set1_ps(node.planes[(n + 3) % 6][c]);
+                let inv: __m512 = std::mem::transmute(lanes.inv[a]);
+                let on: __m512 = std::mem::transmute(lanes.o_inv[0][a]);
+                let of: __m512 = std::mem::transmute(lanes.o_inv[1][a]);
+                enter = _mm512_max_ps(_mm512_fmsub_ps(near, inv, on), enter);
+                exit = _mm512_min_ps(_mm512_fmsub_ps(far, inv, of), exit);
+            }
+            let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(go as __mmask16, enter, exit);
+            if hit == 0 {
+                return (0, f32::INFINITY);
+            }
+            let e = _mm512_mask_blend_ps(hit, _mm512_set1_ps(f32::INFINITY), enter);
+            return (hit as LaneMask, _mm512_reduce_min_ps(e));
+        }
+        for a in 0..3 {
+            let n = lanes.near[a];
+            let near = _mm512_set1_ps(node.planes[n][c]);
+            let far = _mm512_set1_ps(node.planes[(n + 3) % 6][c]);
+            let on: __m512 = std::mem::transmute(lanes.o_near[a]);
+            let of: __m512 = std::mem::transmute(lanes.o_far[a]);
+            let inv: __m512 = std::mem::transmute(lanes.inv[a]);
+            // `maxps`/`minps` keep the second operand over a NaN, as
+            // `max_keep`/`min_keep`.
+            enter = _mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(near, on), inv), enter);
+            exit = _mm512_min_ps(_mm512_mul_ps(_mm512_sub_ps(far, of), inv), exit);
+        }
+        let hit = _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(go as __mmask16, enter, exit);
+        if hit == 0 {
+            return (0, f32::INFINITY);
+        }
+        // Entries are never NaN (`maxps` keeps `t_min` over a NaN slab), so
+        // the order of the minima does not matter: the lane loop's value.
+        let e = _mm512_mask_blend_ps(hit, _mm512_set1_ps(f32::INFINITY), enter);
+        (hit as LaneMask, _mm512_reduce_min_ps(e))
+    }
+}
+
+/// Lane `l` alone through the subtree at `start`; returns whether it was
+/// retired (blocked, for occlusion queries).
+#[inline(always)]
+fn single_lane<const AVX: bool>(
+    bvh: &Bvh8,
+    start: u32,
+    ray: &NodeRay,
+    packet: &mut Packet16,
+    l: usize,
+    leaf: &mut impl FnMut(&mut Packet16, LaneMask, u32) -> LaneMask,
+) -> bool {
+    let mut retired = false;
+    let (t_min, t_max) = (packet.t_min[l], packet.t_max[l]);
+    traverse_from::<AVX>(
+        bvh,
+        start,
+        ray,
+        t_min,
+        t_max,
+        false,
+        #[inline(always)]
+        |leaf_index, _| {
+            let before = packet.t_max[l];
+            if leaf(packet, 1 << l, leaf_index) != 0 {
+                retired = true;
+                return Some(f32::NEG_INFINITY);
+            }
+            (packet.t_max[l] < before).then_some(packet.t_max[l])
+        },
+    );
+    retired
+}
