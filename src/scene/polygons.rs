@@ -162,6 +162,11 @@ impl PolygonBatch {
                 });
                 false
             });
+            // Largest first: the nearest hit found early rejects the
+            // planes of farther polygons before their edges are tested.
+            // (The order changes no answer: ties go to the per-ray query.)
+            batch.polygons[start..]
+                .sort_by(|a, b| b.n.length_squared().total_cmp(&a.n.length_squared()));
             batch.groups.push(Group {
                 instance: first,
                 polygons: start..batch.polygons.len(),
@@ -250,6 +255,9 @@ impl PolygonBatch {
                 let cz = ex * wy - ey * wx;
                 let s = cx * nx + cy * ny + cz * nz;
                 ok[l] &= (!(s < 0.0)) as u32;
+            }
+            if ok.iter().fold(0, |a, &k| a | k) == 0 {
+                return None;
             }
         }
         Some((ok, t, pt))

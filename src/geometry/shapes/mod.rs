@@ -32,8 +32,8 @@ mod planar;
 mod quadrics;
 mod roots;
 
-pub use planar::{polygon_hit, polygon_normal, polygon_uv_axes};
 use planar::{intersect_disk, intersect_plane, intersect_polygon, validate_polygon};
+pub use planar::{polygon_hit, polygon_normal, polygon_uv_axes};
 use quadrics::{
     intersect_cone, intersect_cylinder, intersect_ellipsoid, intersect_hyperboloid,
     intersect_paraboloid, intersect_sphere, rebased,
@@ -121,7 +121,10 @@ impl ShapeHit {
     /// hits [`Shape::intersect`] returns.
     #[inline]
     pub fn is_finite(&self) -> bool {
-        self.t.is_finite() && self.point.is_finite() && self.normal.is_finite() && self.uv.is_finite()
+        self.t.is_finite()
+            && self.point.is_finite()
+            && self.normal.is_finite()
+            && self.uv.is_finite()
     }
 }
 
