@@ -417,6 +417,19 @@ fn batched_polygons_give_the_per_ray_hits() {
     );
     let mut rng = Rng::new(5);
     let mut pick = crate::common::rng::SplitMix64(9);
+    let transforms: Vec<Transform> = (0..4)
+        .map(|k| {
+            if k % 2 == 0 {
+                random_transform(&mut rng, 3.0)
+            } else {
+                Transform::from_trs_f32(
+                    rng.vec(-3.0, 3.0),
+                    Quat::from_axis_angle(Vec3::from(rng.dir()), rng.range(0.0, PI)),
+                    Vec3::ONE,
+                )
+            }
+        })
+        .collect();
     let mut polygons = Vec::new();
     for k in 0..24 {
         let sides = 3 + k % 4;
@@ -430,16 +443,8 @@ fn batched_polygons_give_the_per_ray_hits() {
         let shape = Shape::Polygon {
             vertices: vertices.into(),
         };
-        // Four transforms shared by six polygons each.
-        let t = if k % 4 == 0 {
-            random_transform(&mut rng, 3.0)
-        } else {
-            Transform::from_trs_f32(
-                rng.vec(-3.0, 3.0),
-                Quat::from_axis_angle(Vec3::from(rng.dir()), rng.range(0.0, PI)),
-                Vec3::ONE,
-            )
-        };
+        // Four transforms (two with scale and shear), six polygons each.
+        let t = transforms[k % 4];
         polygons.push(Instance::new(InstanceGeometry::Shape(shape), &t, 0));
     }
     let random = RenderScene::new(
