@@ -107,17 +107,16 @@ impl PolygonBatch {
             return None;
         }
         let materials = scene.materials();
-        let mut order: Vec<u32> = Vec::with_capacity(instances.len());
-        for (i, inst) in instances.iter().enumerate() {
-            match &inst.geometry {
-                InstanceGeometry::Shape(Shape::Polygon { .. })
-                    if materials[inst.material as usize].alpha.is_none() =>
-                {
-                    order.push(i as u32)
-                }
-                _ => return None,
-            }
+        // Checked before anything is allocated: other scenes pay one pass
+        // over at most `MAX_POLYGONS` instances per stage.
+        let eligible = instances.iter().all(|inst| {
+            matches!(inst.geometry, InstanceGeometry::Shape(Shape::Polygon { .. }))
+                && materials[inst.material as usize].alpha.is_none()
+        });
+        if !eligible {
+            return None;
         }
+        let order: Vec<u32> = (0..instances.len() as u32).collect();
         // Group by transform, bit for bit (a translation by -0 and one by
         // +0 round some origins differently), keeping the scene's order
         // within each group.

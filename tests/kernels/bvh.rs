@@ -424,7 +424,7 @@ fn batched_polygons_give_the_per_ray_hits() {
             } else {
                 Transform::from_trs_f32(
                     rng.vec(-3.0, 3.0),
-                    Quat::from_axis_angle(Vec3::from(rng.dir()), rng.range(0.0, PI)),
+                    Quat::from_axis_angle(rng.dir(), rng.range(0.0, PI)),
                     Vec3::ONE,
                 )
             }
