@@ -110,8 +110,10 @@ impl PolygonBatch {
         // Checked before anything is allocated: other scenes pay one pass
         // over at most `MAX_POLYGONS` instances per stage.
         let eligible = instances.iter().all(|inst| {
-            matches!(inst.geometry, InstanceGeometry::Shape(Shape::Polygon { .. }))
-                && materials[inst.material as usize].alpha.is_none()
+            matches!(
+                inst.geometry,
+                InstanceGeometry::Shape(Shape::Polygon { .. })
+            ) && materials[inst.material as usize].alpha.is_none()
         });
         if !eligible {
             return None;
