@@ -10,6 +10,7 @@ pub mod instance;
 pub mod light;
 pub mod material;
 pub mod panorama;
+pub mod polygons;
 pub mod query;
 pub mod render_scene;
 pub mod update;

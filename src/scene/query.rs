@@ -623,7 +623,7 @@ impl RenderScene {
         Some(self.finish_hit(t, index, local))
     }
 
-    fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
+    pub(super) fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
         let inst = &self.instances[index as usize];
         let xf = &inst.transform;
         // The point comes from the object-space surface point, correct to a

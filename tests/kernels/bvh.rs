@@ -381,3 +381,158 @@ fn streams_equal_single_rays() {
     }
     assert!(hits > 3000, "{hits} hits");
 }
+
+/// The batched polygon test of the wavefront (`scene::polygons`) gives
+/// every ray the hit the per-ray query gives, bit for bit (`t`, point,
+/// normals, `uv`, instance), and every segment the same occlusion: on the
+/// Cornell box seen from its camera's render frame (rays aimed at the
+/// polygons' corners, where neighbours tie, and rays from points on the
+/// walls in random directions, as bounces leave them), and on random
+/// polygons of three to six sides under random transforms (several
+/// transform groups).
+#[test]
+fn batched_polygons_give_the_per_ray_hits() {
+    use prism::scene::polygons::PolygonBatch;
+    let desc = crate::common::scenes::load(&crate::common::assets().join("cornell.toml"));
+    let eye = desc.cameras[0].look_from;
+    let instances: Vec<Instance> = desc
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let prism::io::desc::Geometry::Shape(s) = &o.geometry else {
+                unreachable!("the Cornell box is polygons")
+            };
+            Instance::new(InstanceGeometry::Shape(s.clone()), &o.transform, i as u32)
+        })
+        .collect();
+    let materials = desc.objects.iter().map(|o| o.material.clone()).collect();
+    let cornell = RenderScene::with_origin(
+        eye,
+        instances,
+        materials,
+        vec![],
+        Vec3::ZERO,
+        BuildQuality::Medium,
+    );
+    let mut rng = Rng::new(5);
+    let mut pick = crate::common::rng::SplitMix64(9);
+    let transforms: Vec<Transform> = (0..4)
+        .map(|k| {
+            if k % 2 == 0 {
+                random_transform(&mut rng, 3.0)
+            } else {
+                Transform::from_trs_f32(
+                    rng.vec(-3.0, 3.0),
+                    Quat::from_axis_angle(rng.dir(), rng.range(0.0, PI)),
+                    Vec3::ONE,
+                )
+            }
+        })
+        .collect();
+    let mut polygons = Vec::new();
+    for k in 0..24 {
+        let sides = 3 + k % 4;
+        let r = rng.range(0.5, 2.0);
+        let vertices: Vec<Vec3> = (0..sides)
+            .map(|i| {
+                let a = -2.0 * PI * i as f32 / sides as f32;
+                Vec3::new(r * a.cos(), 0.0, r * a.sin())
+            })
+            .collect();
+        let shape = Shape::Polygon {
+            vertices: vertices.into(),
+        };
+        // Four transforms (two with scale and shear), six polygons each.
+        let t = transforms[k % 4];
+        polygons.push(Instance::new(InstanceGeometry::Shape(shape), &t, 0));
+    }
+    let random = RenderScene::new(
+        polygons,
+        vec![Material::default()],
+        vec![],
+        Vec3::ZERO,
+        BuildQuality::Medium,
+    );
+    let (mut ties, mut hits, mut blocked) = (0, 0, 0);
+    for scene in [&cornell, &random] {
+        let batch = PolygonBatch::new(scene).expect("a scene of polygons");
+        let corners: Vec<Vec3A> = scene
+            .instances()
+            .iter()
+            .flat_map(|inst| {
+                let InstanceGeometry::Shape(Shape::Polygon { vertices }) = &inst.geometry else {
+                    unreachable!()
+                };
+                let to_world = inst.transform.to_world;
+                vertices
+                    .iter()
+                    .map(move |v| to_world.transform_point3a(Vec3A::from(*v)))
+            })
+            .collect();
+        let mut rays = Vec::new();
+        let mut t_max = Vec::new();
+        for k in 0..4000 {
+            let ray = match k % 3 {
+                // From the camera (the render origin) or a random point
+                // towards a corner.
+                0 => Ray::new(Vec3A::ZERO, corners[pick.below(corners.len())]),
+                1 => {
+                    let o = Vec3A::from(rng.vec(-6.0, 6.0));
+                    Ray::new(o, corners[pick.below(corners.len())] - o)
+                }
+                // From a point on a surface, anywhere.
+                _ => {
+                    let c = corners[pick.below(corners.len())];
+                    let d = corners[pick.below(corners.len())];
+                    let o = c + (d - c) * rng.range(0.0, 1.0);
+                    Ray::new(o, Vec3A::from(rng.dir()))
+                }
+            };
+            rays.push(ray);
+            t_max.push(if k % 5 == 0 {
+                f32::INFINITY
+            } else {
+                rng.range(0.0, 8.0)
+            });
+        }
+        for (group, limits) in rays.chunks(8).zip(t_max.chunks(8)) {
+            let mut got = [None; 8];
+            batch.intersect(scene, group, &mut got[..group.len()]);
+            let mask = batch.occluded(scene, group, limits);
+            for (l, ray) in group.iter().enumerate() {
+                let want = scene.intersect(ray, 0.0, f32::INFINITY);
+                assert_eq!(format!("{:?}", got[l]), format!("{want:?}"), "{ray:?}");
+                hits += want.is_some() as usize;
+                let occluded = scene.occluded(ray, 0.0, limits[l]);
+                assert_eq!(mask & (1 << l) != 0, occluded, "{ray:?} to {}", limits[l]);
+                blocked += occluded as usize;
+                // A tie: two polygons as near along the ray (handed to
+                // the per-ray query by the batch).
+                let mut near: Vec<u32> = scene
+                    .instances()
+                    .iter()
+                    .filter_map(|inst| {
+                        let InstanceGeometry::Shape(s) = &inst.geometry else {
+                            return None;
+                        };
+                        let m = &inst.transform.to_object;
+                        let local = Ray::new(
+                            m.transform_point3a(ray.origin),
+                            m.transform_vector3a(ray.direction),
+                        );
+                        s.intersect(&local, 0.0, f32::INFINITY)
+                            .map(|h| h.t.to_bits())
+                    })
+                    .collect();
+                near.sort_by(|a, b| f32::from_bits(*a).total_cmp(&f32::from_bits(*b)));
+                ties += (near.len() > 1 && near[0] == near[1]) as usize;
+            }
+        }
+    }
+    eprintln!("{hits} hits, {blocked} blocked, {ties} ties");
+    assert!(
+        hits > 3000 && blocked > 1000 && ties > 10,
+        "{hits} hits, {blocked} blocked, {ties} ties"
+    );
+}

@@ -32,8 +32,8 @@ mod planar;
 mod quadrics;
 mod roots;
 
-pub use planar::polygon_normal;
 use planar::{intersect_disk, intersect_plane, intersect_polygon, validate_polygon};
+pub use planar::{polygon_hit, polygon_normal, polygon_uv_axes};
 use quadrics::{
     intersect_cone, intersect_cylinder, intersect_ellipsoid, intersect_hyperboloid,
     intersect_paraboloid, intersect_sphere, rebased,
@@ -114,6 +114,18 @@ pub struct ShapeHit {
     pub normal: Vec3A,
     /// Surface parameterisation, used for textures.
     pub uv: Vec2,
+}
+
+impl ShapeHit {
+    /// True when `t`, the point, the normal and `uv` are all finite: the
+    /// hits [`Shape::intersect`] returns.
+    #[inline]
+    pub fn is_finite(&self) -> bool {
+        self.t.is_finite()
+            && self.point.is_finite()
+            && self.normal.is_finite()
+            && self.uv.is_finite()
+    }
 }
 
 fn positive(name: &str, v: f32) -> Result<(), String> {
@@ -322,8 +334,7 @@ impl Shape {
                 intersect_hyperboloid(r, *waist_radius, *top_radius, *half_height, lo, hi)
             }),
         }?;
-        (hit.t.is_finite() && hit.point.is_finite() && hit.normal.is_finite() && hit.uv.is_finite())
-            .then_some(hit)
+        hit.is_finite().then_some(hit)
     }
 
     /// Whether [`Shape::intersect`] finds a hit: the same answer, for

@@ -164,6 +164,21 @@ pub(super) fn intersect_polygon(
             return None;
         }
     }
+    Some(polygon_hit(
+        t,
+        p,
+        n,
+        Vec3A::from(vertices[0]),
+        polygon_uv_axes(n),
+    ))
+}
+
+/// The texture axes `(u, v)` of a polygon of Newell normal `n` (see
+/// [`Shape::intersect`](super::Shape::intersect)): `u` the normalised
+/// projection of `+X` onto the plane (`+Z` when `n` is nearly parallel
+/// to `X`), `v = u x n`.
+#[inline]
+pub fn polygon_uv_axes(n: Vec3A) -> (Vec3A, Vec3A) {
     let n_unit = n.normalize();
     let reference = if n_unit.x.abs() < 0.9 {
         Vec3A::X
@@ -171,11 +186,23 @@ pub(super) fn intersect_polygon(
         Vec3A::Z
     };
     let u_axis = (reference - n_unit * n_unit.dot(reference)).normalize();
-    let v_axis = u_axis.cross(n_unit);
-    Some(ShapeHit {
+    (u_axis, u_axis.cross(n_unit))
+}
+
+/// The hit of a ray on a polygon of Newell normal `n` and first vertex
+/// `v0` at parameter `t`, where the ray reaches `p`, once the plane and
+/// edge tests have accepted it; `axes` are [`polygon_uv_axes`] of `n`.
+/// Shared by [`Shape::intersect`](super::Shape::intersect) and the
+/// batched polygon test of the wavefront
+/// ([`crate::scene::polygons`]), so the two build the same hit bit for
+/// bit.
+#[inline]
+pub fn polygon_hit(t: f32, p: Vec3A, n: Vec3A, v0: Vec3A, axes: (Vec3A, Vec3A)) -> ShapeHit {
+    let (u_axis, v_axis) = axes;
+    ShapeHit {
         t,
-        point: p - n * (n.dot(p - Vec3A::from(vertices[0])) / n.length_squared()),
+        point: p - n * (n.dot(p - v0) / n.length_squared()),
         normal: n,
         uv: Vec2::new(p.dot(u_axis), p.dot(v_axis)),
-    })
+    }
 }

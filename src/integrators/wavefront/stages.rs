@@ -28,6 +28,7 @@ use crate::scene::Hit;
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::material::MaterialClass;
+use crate::scene::polygons::PolygonBatch;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
@@ -143,8 +144,12 @@ pub fn intersect_closest(
     // layout (README, "Measurement notes").
     // Every slot is written below: keep what the last bounce left in the
     // slots (resizing fills only new ones) instead of clearing them first.
+    //
+    // A scene of a few polygons skips the top level: eight rays at a
+    // time meet every polygon (`PolygonBatch`), the same hits.
     let n = rays.len();
     found.0.resize(n, None);
+    let batch = PolygonBatch::new(scene);
     found
         .0
         .par_chunks_mut(CHUNK)
@@ -154,7 +159,9 @@ pub fn intersect_closest(
                 let i = c * CHUNK + k * LANES;
                 let m = lanes.len();
                 let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(m - 1)));
-                if one_octant(&packet[..m]) {
+                if let Some(b) = &batch {
+                    b.intersect(scene, &packet[..m], lanes);
+                } else if one_octant(&packet[..m]) {
                     scene.intersect_packet_with(&packet[..m], lanes, true);
                 } else {
                     for (f, r) in lanes.iter_mut().zip(&packet[..m]) {
@@ -416,6 +423,8 @@ fn shade_hits(
         rays, found, hits, ..
     } = input;
     let through_media = scene.has_media() && settings.transport == Transport::Path;
+    let batch = PolygonBatch::new(scene);
+    let batch = batch.as_ref();
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         for group in hits.ray[range].chunks(SHADOW_GROUP) {
@@ -451,19 +460,28 @@ fn shade_hits(
             if through_media {
                 out.trace_shadows_through(|r, t_max| volume::shadow_transmittance(scene, r, t_max));
             } else {
-                out.trace_shadows(|rays, t_max| occluded_group(scene, rays, t_max));
+                out.trace_shadows(|rays, t_max| occluded_group(scene, batch, rays, t_max));
             }
         }
     });
     join_shade_outputs(outputs, to);
 }
 
-/// The mask of the blocked rays among up to [`LANES`] shadow rays: through
-/// the top level as one packet when they point into one octant (each lane
-/// then traverses meshes alone), else one at a time, which costs rays
-/// pointing apart fewer instructions.
+/// The mask of the blocked rays among up to [`LANES`] shadow rays: against
+/// every polygon at once in a scene of a few polygons (`batch`); else
+/// through the top level as one packet when they point into one octant
+/// (each lane then traverses meshes alone), else one at a time, which
+/// costs rays pointing apart fewer instructions.
 #[inline]
-fn occluded_group(scene: &RenderScene, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+fn occluded_group(
+    scene: &RenderScene,
+    batch: Option<&PolygonBatch>,
+    rays: &[Ray],
+    t_max: &[f32],
+) -> LaneMask {
+    if let Some(b) = batch {
+        return b.occluded(scene, rays, t_max);
+    }
     if rays.len() > 1 && one_octant(rays) {
         return scene.occluded_packet_with(rays, t_max, false);
     }
