@@ -396,7 +396,7 @@ impl RenderScene {
                         lanes,
                         #[inline(always)]
                         |l| {
-                            hits[l] = m.intersect_kernel::<AVX>(
+                            hits[l] = m.intersect_for_surface_kernel::<AVX>(
                                 &to_object(inst, &p.rays[l]),
                                 p.t_min[l],
                                 p.t_max[l],
@@ -774,7 +774,7 @@ fn closest_in_geometry<const AVX: bool>(
         InstanceGeometry::Mesh(m) => if brute_force {
             m.intersect_brute_force(local, t_min, t_max)
         } else {
-            m.intersect_kernel::<AVX>(local, t_min, t_max)
+            m.intersect_for_surface_kernel::<AVX>(local, t_min, t_max)
         }
         .map(|h| (h.t, LocalHit::Mesh(h))),
     }
