@@ -652,8 +652,12 @@ impl Mesh {
             );
             return;
         }
-        let wt: [WatertightRay; LANES] =
-            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        // (A loop rather than `std::array::from_fn`, whose closure is not
+        // inlined into the entry point.)
+        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES];
+        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+            *w = WatertightRay::new(r);
+        }
         let lanes = lanes & packet.valid;
         if lanes == 0 {
             return;
@@ -850,8 +854,12 @@ impl Mesh {
             );
             return blocked;
         }
-        let wt: [WatertightRay; LANES] =
-            std::array::from_fn(|l| WatertightRay::new(&packet.rays[l]));
+        // (A loop rather than `std::array::from_fn`, whose closure is not
+        // inlined into the entry point.)
+        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES];
+        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+            *w = WatertightRay::new(r);
+        }
         let lanes = lanes & packet.valid;
         if lanes == 0 {
             return 0;
