@@ -106,6 +106,10 @@ fn frame_loop(c: &mut Criterion) {
                 frames += 1;
             })
         });
+        if frames == 0 {
+            // Filtered out on the command line: nothing ran, nothing to say.
+            continue;
+        }
         let [sync, accel, render] = sums.map(|s| s / frames.max(1) as f64);
         let total = sync + accel + render;
         let n = frames.max(1) as f64;
