@@ -34,31 +34,34 @@ pub const ALL_LANES: LaneMask = (1 << LANES) - 1;
 /// A packet that has shrunk to this many lanes continues ray by ray.
 const DIVERGED: u32 = 2;
 
-/// Rays with their search intervals, lane by lane.
+/// Rays with their search intervals, lane by lane, `N` lanes: [`Packet`]
+/// (8) here, [`crate::accel::packet16::Packet16`] (16) for the AVX-512
+/// traversal.
 #[derive(Clone, Copy, Debug)]
-pub struct Packet {
+pub struct PacketOf<const N: usize> {
     /// Interval starts.
-    pub t_min: [f32; LANES],
+    pub t_min: [f32; N],
     /// Interval ends; closest-hit traversal shrinks them as hits are found.
-    pub t_max: [f32; LANES],
+    pub t_max: [f32; N],
     /// The rays themselves.
-    pub rays: [Ray; LANES],
+    pub rays: [Ray; N],
     /// Lanes holding a ray.
     pub valid: LaneMask,
 }
 
-impl Packet {
-    /// Packs up to [`LANES`] rays with their intervals.
+/// A packet of [`LANES`] rays.
+pub type Packet = PacketOf<LANES>;
+
+impl<const N: usize> PacketOf<N> {
+    /// Packs up to `N` rays with their intervals.
     pub fn new(rays: &[Ray], t_min: &[f32], t_max: &[f32]) -> Self {
-        debug_assert!(
-            rays.len() <= LANES && rays.len() == t_min.len() && rays.len() == t_max.len()
-        );
+        debug_assert!(rays.len() <= N && rays.len() == t_min.len() && rays.len() == t_max.len());
         let empty = Ray::new(Vec3A::ZERO, Vec3A::X);
-        let mut p = Packet {
-            t_min: [0.0; LANES],
+        let mut p = Self {
+            t_min: [0.0; N],
             // Unused lanes can never hit.
-            t_max: [f32::NEG_INFINITY; LANES],
-            rays: [empty; LANES],
+            t_max: [f32::NEG_INFINITY; N],
+            rays: [empty; N],
             valid: 0,
         };
         for (l, r) in rays.iter().enumerate() {

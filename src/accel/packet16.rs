@@ -16,13 +16,10 @@
 
 use std::mem::MaybeUninit;
 
-use glam::Vec3A;
-
 use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
 use crate::accel::node::{NodeRay, max_keep, min_keep};
-use crate::accel::packet::{LaneMask, for_each_lane};
+use crate::accel::packet::{LaneMask, PacketOf, for_each_lane};
 use crate::accel::single::traverse_from;
-use crate::core::math::Ray;
 
 /// Rays per packet.
 pub const LANES16: usize = 16;
@@ -33,43 +30,9 @@ pub const ALL_LANES16: LaneMask = (1 << LANES16) - 1;
 /// A packet that has shrunk to this many lanes continues ray by ray.
 const DIVERGED: u32 = 2;
 
-/// Rays with their search intervals, lane by lane (as
-/// [`crate::accel::packet::Packet`], with 16 lanes).
-#[derive(Clone, Copy, Debug)]
-pub struct Packet16 {
-    /// Interval starts.
-    pub t_min: [f32; LANES16],
-    /// Interval ends; closest-hit traversal shrinks them as hits are found.
-    pub t_max: [f32; LANES16],
-    /// The rays themselves.
-    pub rays: [Ray; LANES16],
-    /// Lanes holding a ray.
-    pub valid: LaneMask,
-}
-
-impl Packet16 {
-    /// Packs up to [`LANES16`] rays with their intervals.
-    pub fn new(rays: &[Ray], t_min: &[f32], t_max: &[f32]) -> Self {
-        debug_assert!(
-            rays.len() <= LANES16 && rays.len() == t_min.len() && rays.len() == t_max.len()
-        );
-        let empty = Ray::new(Vec3A::ZERO, Vec3A::X);
-        let mut p = Packet16 {
-            t_min: [0.0; LANES16],
-            // Unused lanes can never hit.
-            t_max: [f32::NEG_INFINITY; LANES16],
-            rays: [empty; LANES16],
-            valid: 0,
-        };
-        for (l, r) in rays.iter().enumerate() {
-            p.t_min[l] = t_min[l];
-            p.t_max[l] = t_max[l];
-            p.rays[l] = *r;
-            p.valid |= 1 << l;
-        }
-        p
-    }
-}
+/// Rays with their search intervals, lane by lane: the packet of
+/// [`crate::accel::packet`] with 16 lanes.
+pub type Packet16 = PacketOf<LANES16>;
 
 /// The lanes of a packet prepared for one tree, axis by axis.
 #[repr(C, align(64))]
