@@ -9,6 +9,7 @@
 use prism::core::settings::{RenderSettings, Transport};
 use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
+use prism::integrators::wavefront::Stage;
 
 use crate::common::images::film_bits;
 use crate::common::render::{config, render_toml};
@@ -353,4 +354,50 @@ fn a_subsurface_ball_of_tiny_radius_is_the_lambertian_ball() {
             }
         }
     }
+}
+
+/// The wavefront follows a random walk inside a subsurface material in
+/// one pass of its medium stage: no light reaches the walk's scattering
+/// events, so they make no shadow rays, and a walk of many steps costs one
+/// bounce of the queues. A ball of mean free path 1/40 of its radius,
+/// nearly white, under a white sky (one batch of 8x8 pixels, 4 samples):
+/// its walks take on average at least 10 steps (the reflection rays
+/// counted per path; the walks do not depend on the integrator, whose
+/// counts and image agree), yet the batch's longest path needs at most 4
+/// bounces of the queues: the camera ray meets the ball and enters it,
+/// the walk reaches the surface from inside, the path leaves and
+/// escapes (the ball is convex). Queued step by step, the walks made as
+/// many bounces as the longest of them has steps.
+#[test]
+fn the_wavefront_walks_through_a_subsurface_material_in_one_bounce() {
+    let scene = r#"
+[camera]
+look_from = [0, 0, 3]
+look_at = [0, 0, 0]
+vfov = 30
+[environment]
+color = 1.0
+[[objects]]
+shape = { type = "sphere", radius = 1.0 }
+material = { subsurface_color = 0.95, subsurface_radius = 0.025 }
+"#;
+    let s = path_settings(8, 8, 4, 1024);
+    let paths = 8 * 8 * 4;
+    let wav = render_toml(scene, config(s.clone(), IntegratorKind::Wavefront));
+    let rec = render_toml(scene, config(s, IntegratorKind::Recursive));
+    assert_eq!(rec.counters, wav.counters);
+    let (a, b) = (rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
+    for (i, (a, b)) in a.pixels.iter().zip(&b.pixels).enumerate() {
+        let d = (*a - *b).abs().max_element();
+        assert!(
+            d <= 1e-4 * a.abs().max_element().max(1.0),
+            "pixel {i}: recursive {a} wavefront {b}"
+        );
+    }
+    let report = wav.wavefront.unwrap();
+    assert_eq!(report.batches, 1);
+    let steps = wav.counters.rays.reflection as f64 / paths as f64;
+    assert!(steps >= 10.0, "{steps} walk steps per path");
+    let bounces = report.runs.get(Stage::IntersectClosest);
+    assert!(bounces <= 4, "{bounces} bounces for walks of {steps} steps");
 }

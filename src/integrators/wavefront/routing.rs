@@ -210,12 +210,23 @@ impl ShadeOutput {
     /// counts it.
     #[inline]
     pub fn push_secondary(&mut self, kind: RayKind, item: RayItem) {
+        self.count_secondary(kind);
         if kind == RayKind::Refraction {
-            self.counts.refraction += 1;
             self.refractions.push(item);
         } else {
-            self.counts.reflection += 1;
             self.reflections.push(item);
+        }
+    }
+
+    /// Counts a reflection or refraction ray that the stage follows
+    /// itself instead of queueing it (an unlit step of a random walk in
+    /// a medium), as [`ShadeOutput::push_secondary`] counts a queued one.
+    #[inline]
+    pub fn count_secondary(&mut self, kind: RayKind) {
+        if kind == RayKind::Refraction {
+            self.counts.refraction += 1;
+        } else {
+            self.counts.reflection += 1;
         }
     }
 

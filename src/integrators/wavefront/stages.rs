@@ -23,7 +23,7 @@ use crate::integrators::wavefront::queues::{
 use crate::integrators::wavefront::routing::{
     ClassHitQueues, ShadeOutput, ShadeTargets, join_shade_outputs, route_rays,
 };
-use crate::integrators::{accumulate, camera_ray};
+use crate::integrators::{accumulate, camera_ray_paired};
 use crate::scene::Hit;
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
@@ -82,7 +82,7 @@ pub fn generate_camera_rays(
                 None => seed(&k).sampler(),
             };
             RayItem {
-                ray: camera_ray(camera, k.x, k.y, settings.spp, &mut sampler),
+                ray: camera_ray_paired(camera, k.x, k.y, settings.spp, &mut sampler),
                 throughput: Color::ONE,
                 path: local as u32,
                 depth: 0,
@@ -176,13 +176,18 @@ pub fn intersect_closest(
 }
 
 /// How [`sample_media`] changed one ray: it now ends on `hit` (a surface)
-/// or escapes (`None`), with `ray` and `throughput` as the segment left
-/// them. Rays that scattered or were lost have no update.
+/// or escapes (`None`), with `ray`, `throughput`, `depth`, `pdf` and
+/// `cone` as the segment (or the unlit random walk that ended with it)
+/// left them. Rays that scattered into the next bounce or were lost have
+/// no update.
 #[derive(Clone, Copy, Debug)]
 struct SegmentUpdate {
     index: u32,
     ray: Ray,
     throughput: Color,
+    depth: u32,
+    pdf: f32,
+    cone: RayCone,
     hit: Option<Hit>,
 }
 
@@ -236,6 +241,20 @@ pub struct MediaTargets<'a> {
 /// next-event shadow rays ([`volume::medium_next_event`]) and its next
 /// ray ([`volume::continue_in_medium`]). `seeds` holds each path's
 /// sampler seed ([`generate_camera_rays`]).
+///
+/// A scattering event that makes no shadow ray (inside a subsurface
+/// material, behind its diffuse boundary, where
+/// [`volume::MediumVertex::lit`] is false; or where no light can be
+/// sampled) has its next ray followed here at once, one ray at a time as
+/// the recursive tracer follows it, until the walk reaches a surface,
+/// escapes, is lost, or makes shadow rays: a random walk of many steps
+/// costs one bounce of the queues, not one per step (it had been one
+/// pass through every stage and queue per step, most of them over a
+/// handful of rays late in a batch). Each path's terms are added in the
+/// order they were: such a step adds no shadow-ray light, which the
+/// shadow stage would have added after it, so only the light scattered
+/// in along each segment (added as it is found, in step order) comes
+/// before the walk's end.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_media(
     scene: &RenderScene,
@@ -254,60 +273,85 @@ pub fn sample_media(
         updates.clear();
         shaded.clear();
         for i in range {
-            let item = rays_in.get(i);
+            let mut item = rays_in.get(i);
             let mut sampler = seeds[item.path as usize].sampler();
-            let seg = volume::propagate(
-                scene,
-                &item.ray,
-                found_in.0[i],
-                item.depth,
-                item.throughput,
-                &mut sampler,
-            );
-            shaded.count_rays(seg.rays.0, seg.rays.1);
-            if seg.radiance != Color::ZERO {
-                shaded.emit(item.path, item.throughput * seg.radiance);
-            }
-            let throughput = item.throughput * seg.weight;
-            match seg.end {
-                SegmentEnd::Surface { hit, ray } => updates.push(SegmentUpdate {
+            let mut found = found_in.0[i];
+            // One segment per pass; passes after the first follow an unlit
+            // random walk (see above).
+            loop {
+                let seg = volume::propagate(
+                    scene,
+                    &item.ray,
+                    found,
+                    item.depth,
+                    item.throughput,
+                    &mut sampler,
+                );
+                shaded.count_rays(seg.rays.0, seg.rays.1);
+                if seg.radiance != Color::ZERO {
+                    shaded.emit(item.path, item.throughput * seg.radiance);
+                }
+                let throughput = item.throughput * seg.weight;
+                let update = |ray, hit| SegmentUpdate {
                     index: i as u32,
                     ray,
                     throughput,
-                    hit: Some(hit),
-                }),
-                SegmentEnd::Escaped(d) => updates.push(SegmentUpdate {
-                    index: i as u32,
-                    ray: Ray::new(item.ray.origin, d),
-                    throughput,
-                    hit: None,
-                }),
-                SegmentEnd::Lost => {}
-                SegmentEnd::Scattered(v) => {
-                    volume::medium_next_event(scene, settings, &v, &mut sampler, item.depth, |q| {
-                        shaded.push_shadow_from(item.path, throughput, q)
-                    });
-                    shaded.trace_shadows_through(|r, t_max| {
-                        volume::shadow_transmittance(scene, r, t_max)
-                    });
-                    if let Some(c) = volume::continue_in_medium(
-                        settings,
-                        &v,
-                        item.depth,
-                        throughput,
-                        &mut sampler,
-                    ) {
-                        let next = RayItem {
-                            ray: c.sample.ray,
-                            throughput: throughput * c.sample.weight * c.scale,
-                            path: item.path,
-                            depth: item.depth + 1,
-                            pdf: c.sample.pdf,
-                            cone: RayCone::NONE,
-                        };
-                        shaded.push_secondary(c.sample.kind, next);
+                    depth: item.depth,
+                    pdf: item.pdf,
+                    cone: item.cone,
+                    hit,
+                };
+                match seg.end {
+                    SegmentEnd::Surface { hit, ray } => updates.push(update(ray, Some(hit))),
+                    SegmentEnd::Escaped(d) => {
+                        updates.push(update(Ray::new(item.ray.origin, d), None));
+                    }
+                    SegmentEnd::Lost => {}
+                    SegmentEnd::Scattered(v) => {
+                        let mut shadowed = false;
+                        volume::medium_next_event(
+                            scene,
+                            settings,
+                            &v,
+                            &mut sampler,
+                            item.depth,
+                            |q| {
+                                shadowed = true;
+                                shaded.push_shadow_from(item.path, throughput, q)
+                            },
+                        );
+                        shaded.trace_shadows_through(|r, t_max| {
+                            volume::shadow_transmittance(scene, r, t_max)
+                        });
+                        if let Some(c) = volume::continue_in_medium(
+                            settings,
+                            &v,
+                            item.depth,
+                            throughput,
+                            &mut sampler,
+                        ) {
+                            let next = RayItem {
+                                ray: c.sample.ray,
+                                throughput: throughput * c.sample.weight * c.scale,
+                                path: item.path,
+                                depth: item.depth + 1,
+                                pdf: c.sample.pdf,
+                                cone: RayCone::NONE,
+                            };
+                            if shadowed {
+                                shaded.push_secondary(c.sample.kind, next);
+                            } else {
+                                // The event made no shadow ray (no light
+                                // reaches it): walk on here.
+                                shaded.count_secondary(c.sample.kind);
+                                item = next;
+                                found = scene.intersect(&item.ray, 0.0, f32::INFINITY);
+                                continue;
+                            }
+                        }
                     }
                 }
+                break;
             }
         }
     });
@@ -324,6 +368,9 @@ pub fn sample_media(
         rays.origin[i] = u.ray.origin;
         rays.direction[i] = u.ray.direction;
         rays.throughput[i] = u.throughput;
+        rays.depth[i] = u.depth;
+        rays.pdf[i] = u.pdf;
+        rays.cone[i] = u.cone;
         found.0[i] = u.hit;
         match u.hit {
             None => escaped.push(u.index),
