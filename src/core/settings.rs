@@ -354,8 +354,14 @@ impl Accel {
 }
 
 /// Default bounce from which Russian roulette may end a path: the first
-/// bounces carry most of the image and are always traced.
-pub const DEFAULT_RR_START_DEPTH: u32 = 3;
+/// bounces carry most of the image and are always traced. 5, as Mitsuba
+/// 3's `rr_depth`: path tracing `assets/gltf/cornell.gltf` at 320x240, 64
+/// spp and 16 bounces, it traces 25% more rays than 3 did for 31% less
+/// relMSE and 16% less mean relative error against a 4096-spp reference,
+/// 1.15x and 1.14x the efficiency (1 / (error measure x rays), the mean
+/// relative error squared); on `assets/gltf/spheres.gltf` 6% more rays,
+/// 1.10x and 1.05x.
+pub const DEFAULT_RR_START_DEPTH: u32 = 5;
 
 /// Largest number of light samples per area light accepted.
 pub const MAX_LIGHT_SAMPLES: u32 = 1024;
