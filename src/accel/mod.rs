@@ -1,8 +1,8 @@
 //! Layer 1: acceleration structures over boxes. BVH build presets and
 //! padded boxes, Prism's 8-wide node layout, the one conservative node
 //! test, the single-ray, packet and stream traversals that share it, the
-//! top-level BVH over placements, and the choice of SIMD code path.
-//! Knows nothing of what the boxes contain.
+//! top-level BVH over placements (the SIMD code path they take is chosen
+//! in [`crate::core::simd`]). Knows nothing of what the boxes contain.
 
 pub mod build;
 pub mod bvh8;
@@ -12,7 +12,6 @@ pub mod mailbox;
 pub mod node;
 pub mod packet;
 pub mod packet16;
-pub mod simd;
 pub mod single;
 pub mod stream;
 pub mod tlas;

@@ -132,7 +132,7 @@ impl NodeRay {
     /// box grown by the margin, and `enter[c]` is the distance at which it
     /// does (at least `t_min`). Empty slots are never entered. `AVX`
     /// selects the AVX2 code (only valid on a CPU that has it, see
-    /// [`crate::accel::simd`]); both give the same bits.
+    /// [`crate::core::simd`]); both give the same bits.
     #[inline(always)]
     pub fn test<const AVX: bool>(
         &self,
@@ -253,7 +253,7 @@ impl NodeRay {
     /// # Safety
     /// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
     /// `#[target_feature]` of its own, so that it is inlined into the AVX2
-    /// entry point with its intrinsics (see [`crate::accel::simd`]).
+    /// entry point with its intrinsics (see [`crate::core::simd`]).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(unsafe_code)]

@@ -307,7 +307,7 @@ fn test_child<const AVX: bool>(
 /// # Safety
 /// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
 /// `#[target_feature]` of its own, so that it is inlined into the AVX2
-/// entry point with its intrinsics (see [`crate::accel::simd`]).
+/// entry point with its intrinsics (see [`crate::core::simd`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 #[allow(unsafe_code)]

@@ -62,7 +62,7 @@ const FIXED: usize = 48;
 /// `packet.t_max` of the lanes it hits (closest hit) or returns the lanes
 /// found blocked, which retires them. `AVX` selects the AVX2 code of the
 /// single-ray fallback and `AVX512` the 16-wide child test (each only
-/// valid on a CPU that has it, see [`crate::accel::simd`]).
+/// valid on a CPU that has it, see [`crate::core::simd`]).
 #[inline(always)]
 pub fn traverse16<const AVX: bool, const AVX512: bool>(
     bvh: &Bvh8,
@@ -285,7 +285,7 @@ fn test_child<const AVX512: bool>(
 ///
 /// # Safety
 /// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point (see
-/// [`crate::accel::simd`]).
+/// [`crate::core::simd`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 #[allow(unsafe_code)]

@@ -248,7 +248,7 @@ fn node_masks<const AVX: bool>(
 }
 
 /// The loop of [`node_masks`], a plain loop so that the node test is
-/// inlined into its code path (see [`crate::accel::simd`]).
+/// inlined into its code path (see [`crate::core::simd`]).
 #[inline(always)]
 fn node_masks_loop<const AVX: bool>(
     node: &Node8,

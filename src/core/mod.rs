@@ -1,7 +1,7 @@
 //! Layer 0: numbers and the words every other layer uses. Vectors, rays
 //! and colours, random numbers and sampling warps, optics formulas (the glTF
-//! microfacet BRDF among them), errors,
-//! and the render settings with their limits. Imports nothing of the crate.
+//! microfacet BRDF among them), errors, the SIMD code path chosen at run
+//! time, and the render settings with their limits. Imports nothing of the crate.
 
 pub mod clip;
 pub mod counters;
@@ -15,5 +15,6 @@ pub mod radiosity;
 pub mod rng;
 pub mod sampling;
 pub mod settings;
+pub mod simd;
 pub mod spectrum;
 pub mod window;

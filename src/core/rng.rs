@@ -116,7 +116,7 @@ static SOBOL_BYTES: std::sync::LazyLock<Box<[[u32; 4]; 512]>> = std::sync::LazyL
 #[inline(always)]
 fn sobol_set(sample: u32, seed: u32) -> [f32; 4] {
     #[cfg(target_arch = "x86_64")]
-    if crate::accel::simd::use_avx2() {
+    if crate::core::simd::use_avx2() {
         // SAFETY: `use_avx2` holds only on CPUs with AVX2 and FMA
         // (`simd::active` checks them at run time).
         #[allow(unsafe_code)]
@@ -364,7 +364,7 @@ mod tests {
     #[test]
     fn sobol_set_is_the_crates_sample_4d() {
         #[cfg(target_arch = "x86_64")]
-        let avx2 = crate::accel::simd::supported(crate::accel::simd::Isa::Avx2);
+        let avx2 = crate::core::simd::supported(crate::core::simd::Isa::Avx2);
         let mut seeds = vec![0u32, 1, 0x79c6_8e4a, u32::MAX];
         let mut z = 3u64;
         for _ in 0..64 {

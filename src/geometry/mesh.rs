@@ -1376,7 +1376,7 @@ mod tests {
     /// are checked on every SIMD path this CPU has.
     #[test]
     fn camera_packets_give_single_ray_hits_bit_for_bit() {
-        use crate::accel::simd::{self, Isa};
+        use crate::core::simd::{self, Isa};
         let isas: Vec<Isa> = [Isa::Portable, Isa::Avx2, Isa::Avx512]
             .into_iter()
             .filter(|&i| simd::supported(i))

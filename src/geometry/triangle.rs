@@ -322,7 +322,7 @@ impl WatertightRay {
     /// `blocks[1]` the rest), as `(lane, t, b1, b2)` with lane `l` the
     /// leaf's triangle `l`: [`Self::intersect4`] over eight lanes, one
     /// 8-wide pass with `AVX` (valid only on a CPU with AVX2, see
-    /// [`crate::accel::simd`]), two 4-wide ones otherwise. Every lane
+    /// [`crate::core::simd`]), two 4-wide ones otherwise. Every lane
     /// computes exactly the operations of [`Self::intersect`] for its
     /// triangle, so both paths and the one-triangle test agree bit for
     /// bit; the nearest wins, a later lane only when strictly nearer.
@@ -418,7 +418,7 @@ impl WatertightRay {
     /// # Safety
     /// Only on a CPU with AVX2 and FMA. `#[inline(always)]` without a
     /// `#[target_feature]` of its own, so that it is inlined into the AVX2
-    /// entry point with its intrinsics (see [`crate::accel::simd`]).
+    /// entry point with its intrinsics (see [`crate::core::simd`]).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(unsafe_code)]
@@ -900,7 +900,7 @@ fn edges_lanes16(
 ///
 /// # Safety
 /// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point (see
-/// [`crate::accel::simd`]).
+/// [`crate::core::simd`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 #[allow(unsafe_code)]
@@ -985,7 +985,7 @@ fn edge_lanes4(xy: [(Vec4, Vec4); 3], b: [Vec4; 3]) -> (u32, [[f32; 4]; 3], [[f3
 /// # Safety
 /// Only on a CPU with AVX2 and FMA; `#[inline(always)]` without a
 /// `#[target_feature]`, inlined into the AVX2 entry point with its
-/// intrinsics (see [`crate::accel::simd`]).
+/// intrinsics (see [`crate::core::simd`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 #[allow(unsafe_code)]
@@ -1112,7 +1112,7 @@ mod tests {
     /// halves of a leaf (equal `t`: the first lane wins).
     #[test]
     fn side_by_side_lanes_equal_one_at_a_time() {
-        let avx2 = crate::accel::simd::supported(crate::accel::simd::Isa::Avx2);
+        let avx2 = crate::core::simd::supported(crate::core::simd::Isa::Avx2);
         let mut s = 11u64;
         let mut next = || {
             s = s
@@ -1197,7 +1197,7 @@ mod tests {
     /// interval ends.
     #[test]
     fn framed_lanes_equal_the_eight_triangle_test() {
-        let avx2 = crate::accel::simd::supported(crate::accel::simd::Isa::Avx2);
+        let avx2 = crate::core::simd::supported(crate::core::simd::Isa::Avx2);
         let mut s = 5u64;
         let mut next = || {
             s = s

@@ -9,8 +9,8 @@
 
 use glam::Vec3A;
 use prism::accel::packet::LANES;
-use prism::accel::simd::{self, Isa};
 use prism::core::math::Ray;
+use prism::core::simd::{self, Isa};
 use prism::scene::{Hit, RenderScene, StreamScratch};
 
 use crate::bvh::random_scene;

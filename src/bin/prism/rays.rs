@@ -15,10 +15,10 @@ use serde::Serialize;
 
 use prism::accel::packet::{LANES, Packet};
 use prism::accel::packet16::{LANES16, Packet16};
-use prism::accel::simd;
 use prism::accel::stream::Stream;
 use prism::core::error::{Error, Result};
 use prism::core::math::Ray;
+use prism::core::simd;
 use prism::geometry::mesh::{BuildQuality, Mesh, MeshData, MeshHit, NormalMode};
 
 /// Options of `prism bench rays`.

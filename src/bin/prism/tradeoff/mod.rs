@@ -181,11 +181,15 @@ const SPP_VALUES: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
 const DEPTH_VALUES: [u32; 7] = [0, 1, 2, 4, 6, 8, 12];
 const MIN_CONTRIBUTION_VALUES: [f32; 6] = [0.0, 0.001, 0.01, 0.03, 0.1, 0.3];
 const LIGHT_SAMPLE_VALUES: [u32; 4] = [1, 2, 4, 8];
-const RR_VALUES: [Option<u32>; 3] = [
+// Off, from the first bounce, from bounce 3 (the default until issue 13)
+// and from the default bounce (5).
+const RR_VALUES: [Option<u32>; 4] = [
     None,
     Some(1),
+    Some(3),
     Some(prism::core::settings::DEFAULT_RR_START_DEPTH),
 ];
+const _: () = assert!(prism::core::settings::DEFAULT_RR_START_DEPTH != 3);
 const BVH_VALUES: [BuildQuality; 6] = [
     BuildQuality::Fastest,
     BuildQuality::VeryFast,
@@ -702,7 +706,7 @@ mod tests {
                 spp: 16,
                 max_depth: 8,
                 transport: Transport::Path,
-                rr_start_depth: Some(3),
+                rr_start_depth: Some(prism::core::settings::DEFAULT_RR_START_DEPTH),
                 ..Default::default()
             },
             bvh: BuildQuality::Medium,

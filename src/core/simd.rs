@@ -176,7 +176,7 @@ macro_rules! simd_entry {
                 fn fast(this: &$self_ty $(, $arg: $ty)*) -> $ret {
                     this.$body::<true>($($arg),*)
                 }
-                if $crate::accel::simd::use_avx2() {
+                if $crate::core::simd::use_avx2() {
                     // SAFETY: `use_avx2` holds only on CPUs with AVX2 and
                     // FMA (`simd::supported`).
                     #[allow(unsafe_code)]
@@ -212,13 +212,13 @@ macro_rules! simd_entry_wide {
                 fn fast(this: &$self_ty $(, $arg: $ty)*) -> $ret {
                     this.$body::<true, false>($($arg),*)
                 }
-                if $crate::accel::simd::use_avx512() {
+                if $crate::core::simd::use_avx512() {
                     // SAFETY: `use_avx512` holds only on CPUs with
                     // AVX-512F, AVX2 and FMA (`simd::supported`).
                     #[allow(unsafe_code)]
                     return unsafe { widest(self $(, $arg)*) };
                 }
-                if $crate::accel::simd::use_avx2() {
+                if $crate::core::simd::use_avx2() {
                     // SAFETY: `use_avx2` holds only on CPUs with AVX2 and
                     // FMA (`simd::supported`).
                     #[allow(unsafe_code)]
