@@ -220,6 +220,39 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     }
 }
 
+/// Writes into `order` the indices of `rays` grouped by direction octant
+/// (the signs of the direction's components, `-0.0` counted negative),
+/// keeping their order inside each octant: a counting sort in two passes.
+///
+/// Tracing incoherent rays one at a time in this order instead of as
+/// given keeps the traversal's branches (which child is nearer, which
+/// slab plane is entered first) the same from one ray to the next while
+/// neighbouring rays still start close together; hits do not change, only
+/// the order in which rays are traced. Measured in `prism bench rays`
+/// (mode `binned`, see the README).
+pub fn octant_order(rays: &[Ray], order: &mut Vec<u32>) {
+    let octant = |r: &Ray| {
+        let d = r.direction;
+        (d.x.is_sign_negative() as usize)
+            | ((d.y.is_sign_negative() as usize) << 1)
+            | ((d.z.is_sign_negative() as usize) << 2)
+    };
+    let mut start = [0u32; 9];
+    for r in rays {
+        start[octant(r) + 1] += 1;
+    }
+    for o in 1..9 {
+        start[o] += start[o - 1];
+    }
+    order.clear();
+    order.resize(rays.len(), 0);
+    for (i, r) in rays.iter().enumerate() {
+        let o = octant(r);
+        order[start[o] as usize] = i as u32;
+        start[o] += 1;
+    }
+}
+
 /// Whether traversal prefetches the children it enters beside a sibling
 /// (the farther ones wait on the stack, so their loads overlap the work on
 /// the nearer ones). Measured on the anchors' 100k mesh, one thread, rays
@@ -329,6 +362,45 @@ pub fn traverse_bvh<const AVX: bool>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3A;
+
+    /// The octant order is a stable sort of the rays by the signs of
+    /// their direction components (checked against the standard library's
+    /// stable sort), `-0.0` counted as negative.
+    #[test]
+    fn octant_order_is_a_stable_sort_by_direction_signs() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let comp = |v: u64| match v % 5 {
+            0 => 0.0,
+            1 => -0.0,
+            2 => 1.5,
+            3 => -2.0,
+            _ => f32::MIN_POSITIVE,
+        };
+        let rays: Vec<Ray> = (0..1000)
+            .map(|_| {
+                let d = Vec3A::new(comp(next()), comp(next()), comp(next()));
+                Ray::new(Vec3A::ZERO, d)
+            })
+            .collect();
+        let key = |r: &Ray| {
+            let d = r.direction;
+            (d.x.to_bits() >> 31) | ((d.y.to_bits() >> 31) << 1) | ((d.z.to_bits() >> 31) << 2)
+        };
+        let mut expect: Vec<u32> = (0..rays.len() as u32).collect();
+        expect.sort_by_key(|&i| key(&rays[i as usize]));
+        let mut order = vec![7; 3];
+        octant_order(&rays, &mut order);
+        assert_eq!(order, expect);
+        octant_order(&[], &mut order);
+        assert!(order.is_empty());
+    }
 
     /// The stack gives back every entry, last in first out, past its
     /// fixed part.

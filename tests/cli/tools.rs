@@ -432,9 +432,9 @@ fn bench_rays_measures_every_mode_and_agrees_with_the_reference() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["triangles"], 2);
     let modes = v["modes"].as_array().unwrap();
-    // Two ray sets, four modes (single, packets of 8 and 16, streams),
-    // two thread counts.
-    assert_eq!(modes.len(), 16);
+    // Two ray sets, five modes (single, packets of 8 and 16, streams,
+    // octant-binned single rays), two thread counts.
+    assert_eq!(modes.len(), 20);
     for m in modes {
         // 5 x 5 grid points inside the square; the 5 on the shared
         // diagonal go to exactly one of the two triangles, which the
