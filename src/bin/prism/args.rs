@@ -79,7 +79,7 @@ pub struct PathFlags {
     #[arg(long)]
     pub light_samples: Option<u32>,
     /// Path tracing: bounce from which Russian roulette may end paths
-    /// [default: the scene's, else 3].
+    /// [default: the scene's, else 5].
     #[arg(long, value_name = "DEPTH")]
     pub rr_depth: Option<u32>,
     /// Random numbers: Owen-scrambled Sobol points, stratified per pixel,

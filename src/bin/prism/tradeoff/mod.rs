@@ -48,7 +48,7 @@ pub(crate) mod plot;
         "Base light samples per area light [default: the scene's, else 1]"
     )),
     mut_arg("rr_depth", |a| a.help(
-        "Base Russian roulette start depth [default: the scene's, else 3]"
+        "Base Russian roulette start depth [default: the scene's, else 5]"
     )),
     mut_arg("seed", |a| a.help("Base seed [default: the scene's, else 0]")),
     mut_arg("integrator", |a| a.help("Integrator for every render")),
