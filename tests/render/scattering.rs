@@ -185,6 +185,18 @@ fn foggy(kind: IntegratorKind, threads: usize) -> Film {
     })
 }
 
+/// The recursive (`rec`) and wavefront (`wav`) images of one scene agree
+/// to 1e-4 in every pixel (relative to the pixel, absolute below 1).
+fn assert_integrators_agree(rec: &Film, wav: &Film) {
+    for (i, (a, b)) in rec.pixels.iter().zip(&wav.pixels).enumerate() {
+        let d = (*a - *b).abs().max_element();
+        assert!(
+            d <= 1e-4 * a.abs().max_element().max(1.0),
+            "pixel {i}: recursive {a} wavefront {b}"
+        );
+    }
+}
+
 /// Media images are bit-identical on 1 and 2 threads in each integrator,
 /// and the integrators agree to 1e-4 (relative to the pixel, absolute
 /// below 1).
@@ -200,14 +212,8 @@ fn media_images_are_bit_identical_across_threads_and_integrators_agree() {
         film_bits(&wav),
         film_bits(&foggy(IntegratorKind::Wavefront, 2))
     );
-    for (i, (a, b)) in rec.pixels.iter().zip(&wav.pixels).enumerate() {
-        let d = (*a - *b).abs().max_element();
-        assert!(
-            d <= 1e-4 * a.abs().max_element().max(1.0),
-            "pixel {i}: recursive {a} wavefront {b}"
-        );
-        assert!(a.is_finite());
-    }
+    assert_integrators_agree(&rec, &wav);
+    assert!(rec.pixels.iter().all(|a| a.is_finite()));
     // The fog is lit: no pixel is black (every camera ray scatters light
     // of the lights back before it reaches anything).
     assert!(rec.pixels.iter().all(|p| p.max_element() > 0.0));
@@ -386,14 +392,7 @@ material = { subsurface_color = 0.95, subsurface_radius = 0.025 }
     let wav = render_toml(scene, config(s.clone(), IntegratorKind::Wavefront));
     let rec = render_toml(scene, config(s, IntegratorKind::Recursive));
     assert_eq!(rec.counters, wav.counters);
-    let (a, b) = (rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
-    for (i, (a, b)) in a.pixels.iter().zip(&b.pixels).enumerate() {
-        let d = (*a - *b).abs().max_element();
-        assert!(
-            d <= 1e-4 * a.abs().max_element().max(1.0),
-            "pixel {i}: recursive {a} wavefront {b}"
-        );
-    }
+    assert_integrators_agree(rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
     let report = wav.wavefront.unwrap();
     assert_eq!(report.batches, 1);
     let steps = wav.counters.rays.reflection as f64 / paths as f64;
