@@ -665,7 +665,7 @@ impl Mesh {
         // Lanes that share one origin and permutation (a pinhole's camera
         // rays) test a leaf from one frame of it.
         let (shared, lead) = Self::frame_lanes(&wt, lanes);
-        crate::accel::packet::traverse::<AVX>(
+        crate::accel::packet::traverse::<AVX, true>(
             &self.bvh,
             packet,
             lanes,
@@ -866,7 +866,7 @@ impl Mesh {
         }
         let (shared, lead) = Self::frame_lanes(&wt, lanes);
         let mut blocked = 0;
-        crate::accel::packet::traverse::<AVX>(
+        crate::accel::packet::traverse::<AVX, false>(
             &self.bvh,
             packet,
             lanes,

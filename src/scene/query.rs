@@ -322,7 +322,7 @@ impl RenderScene {
         }
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX>(
+        packet::traverse::<AVX, false>(
             bvh,
             &mut packet,
             ALL_LANES,
@@ -520,7 +520,7 @@ impl RenderScene {
         let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
         let todo = ALL_LANES & !blocked;
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX>(
+        packet::traverse::<AVX, false>(
             bvh,
             &mut packet,
             todo,
