@@ -257,6 +257,13 @@ const FIXED: usize = 48;
 /// Children are visited nearest first (by the smallest entry distance of
 /// the lanes that enter them), and a popped subtree is skipped for lanes
 /// that have since found a nearer hit.
+///
+/// With `FRUSTUM`, each node's children are first tested at once against
+/// bounds of the whole packet (`Frustum`), and those no lane can enter
+/// are skipped without their lane tests: the same children are entered
+/// either way, so the hits do not change. It pays for closest-hit
+/// packets of alike rays (camera rays in mesh BVHs); the top level and
+/// shadow packets measured slower with it.
 #[inline(always)]
 pub fn traverse<const AVX: bool, const FRUSTUM: bool>(
     bvh: &Bvh8,
