@@ -27,6 +27,7 @@ use crate::integrators::{accumulate, camera_ray_paired};
 use crate::scene::Hit;
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
+use crate::scene::light::WorldLight;
 use crate::scene::material::MaterialClass;
 use crate::scene::polygons::PolygonBatch;
 use crate::transport::gooch::gooch_shade;
@@ -34,7 +35,9 @@ use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{self, LobeChoice};
 use crate::transport::volume::{self, SegmentEnd};
-use crate::transport::whitted::{direct_light, scatter};
+use crate::transport::whitted::{
+    HitLanes, LIGHT_LANES, LightLanes, direct_light, direct_point_lights, scatter,
+};
 
 /// Stage: one camera ray per path of the batch `[first, first + count)`,
 /// made in parallel chunks. Path `p` goes where `paths` says (sample
@@ -440,6 +443,48 @@ pub struct ShadeInput<'a> {
     pub wavelengths: &'a [f32],
 }
 
+/// The hit item and interaction of a ray's closest hit, the item's
+/// throughput attenuated by what its segment crossed.
+#[inline(always)]
+fn prepare_hit(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    hit: &Hit,
+    ray: &RayItem,
+) -> (HitItem, Interaction) {
+    let mut h = HitItem::new(hit, ray);
+    let it = Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
+    // A segment that ran through an absorbing interior carries its
+    // transmittance to everything seen at its end. In a scene with media,
+    // path transport has weighed the segment in `sample_media`, and
+    // Whitted transport attenuates it by its medium's extinction.
+    let tr = if scene.has_media() {
+        whitted_media_transmittance(scene, settings, &h)
+    } else {
+        interior_transmittance(&it, h.distance)
+    };
+    if let Some(tr) = tr {
+        h.throughput *= tr;
+    }
+    (h, it)
+}
+
+/// Traces the shadow rays a shading chunk pushed since the last call
+/// (see [`shade_hits`]).
+#[inline(always)]
+fn trace_chunk_shadows(
+    scene: &RenderScene,
+    through_media: bool,
+    batch: Option<&PolygonBatch>,
+    out: &mut ShadeOutput,
+) {
+    if through_media {
+        out.trace_shadows_through(|r, t_max| volume::shadow_transmittance(scene, r, t_max));
+    } else {
+        out.trace_shadows(|rays, t_max| occluded_group(scene, batch, rays, t_max));
+    }
+}
+
 /// Hits whose shadow rays a shading chunk traces together (see
 /// [`ShadeOutput::trace_shadows`]): enough for full packets of rays of
 /// neighbouring hits towards each light, few enough that the group's rays
@@ -481,34 +526,11 @@ fn shade_hits(
                     debug_assert!(false, "ray {i} is queued for shading without a hit");
                     continue;
                 };
-                let mut h = HitItem::new(hit, &rays.get(i));
-                let it = Interaction::with_cone(
-                    scene,
-                    &Ray::new(h.point, h.direction),
-                    &h.hit(),
-                    h.cone,
-                );
-                // A segment that ran through an absorbing interior carries
-                // its transmittance to everything seen at its end. In a
-                // scene with media, path transport has weighed the segment
-                // in `sample_media`, and Whitted transport attenuates it by
-                // its medium's extinction.
-                let tr = if scene.has_media() {
-                    whitted_media_transmittance(scene, settings, &h)
-                } else {
-                    interior_transmittance(&it, h.distance)
-                };
-                if let Some(tr) = tr {
-                    h.throughput *= tr;
-                }
+                let (h, it) = prepare_hit(scene, settings, hit, &rays.get(i));
                 kernel(&h, &it, out);
                 out.end_hit();
             }
-            if through_media {
-                out.trace_shadows_through(|r, t_max| volume::shadow_transmittance(scene, r, t_max));
-            } else {
-                out.trace_shadows(|rays, t_max| occluded_group(scene, batch, rays, t_max));
-            }
+            trace_chunk_shadows(scene, through_media, batch, out);
         }
     });
     join_shade_outputs(outputs, to);
@@ -575,6 +597,9 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
+    if LIT && settings.style != Style::Gooch && !scene.lights().is_empty() {
+        return shade_lit_in_lanes::<SCATTER>(scene, settings, input, scratch, to);
+    }
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         if it.surface.emission != Color::ZERO {
             out.emit(h.path, h.throughput * it.surface.emission);
@@ -591,24 +616,175 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
                 }
             }
         }
-        if SCATTER && h.depth < settings.max_depth {
-            for s in scatter(it).into_iter().flatten() {
-                let t = h.throughput * s.weight;
-                if max_component(t) < settings.min_contribution {
-                    continue;
-                }
-                let item = RayItem {
-                    ray: s.ray,
-                    throughput: t,
-                    path: h.path,
-                    depth: h.depth + 1,
-                    pdf: 0.0,
-                    cone: it.cone,
-                };
-                out.push_secondary(s.kind, item);
-            }
+        if SCATTER {
+            push_specular(settings, h, it, out);
         }
     });
+}
+
+/// Pushes the reflection and refraction rays of a Whitted hit above the
+/// contribution threshold, up to the maximum depth.
+#[inline(always)]
+fn push_specular(settings: &RenderSettings, h: &HitItem, it: &Interaction, out: &mut ShadeOutput) {
+    if h.depth >= settings.max_depth {
+        return;
+    }
+    for s in scatter(it).into_iter().flatten() {
+        let t = h.throughput * s.weight;
+        if max_component(t) < settings.min_contribution {
+            continue;
+        }
+        let item = RayItem {
+            ray: s.ray,
+            throughput: t,
+            path: h.path,
+            depth: h.depth + 1,
+            pdf: 0.0,
+            cone: it.cone,
+        };
+        out.push_secondary(s.kind, item);
+    }
+}
+
+/// [`shade`] of a lit class (not Gooch): the hits of each chunk are taken
+/// [`LIGHT_LANES`] at a time, and each light's shadow rays for the lit
+/// ones among them are set up side by side ([`direct_point_lights`] for
+/// point lights, [`direct_light`] per hit for the others): the hits of a
+/// wavefront queue are of one material class, so the lanes run the same
+/// code. Each lane's query is [`direct_light`]'s bit for bit, and the
+/// rays are pushed in the order of the per-hit kernel (hit by hit, light
+/// by light), so the image is the recursive tracer's.
+fn shade_lit_in_lanes<const SCATTER: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    input: ShadeInput<'_>,
+    scratch: &mut ShadeScratch,
+    to: ShadeTargets<'_>,
+) {
+    let ShadeInput {
+        rays, found, hits, ..
+    } = input;
+    let through_media = scene.has_media() && settings.transport == Transport::Path;
+    let batch = PolygonBatch::new(scene);
+    let batch = batch.as_ref();
+    let lights = scene.lights();
+    let outputs = drain_queue(hits.len(), scratch, |range, out| {
+        out.clear();
+        let mut per_light = vec![LightLanes::default(); lights.len()];
+        let mut prepared: Vec<(HitItem, Interaction)> = Vec::with_capacity(LIGHT_LANES);
+        for group in hits.ray[range].chunks(SHADOW_GROUP) {
+            for sub in group.chunks(LIGHT_LANES) {
+                prepared.clear();
+                for &i in sub {
+                    let i = i as usize;
+                    let Some(hit) = &found.0[i] else {
+                        debug_assert!(false, "ray {i} is queued for shading without a hit");
+                        continue;
+                    };
+                    prepared.push(prepare_hit(scene, settings, hit, &rays.get(i)));
+                }
+                let mut lit = [0usize; LIGHT_LANES];
+                let mut n_lit = 0;
+                for (k, (_, it)) in prepared.iter().enumerate() {
+                    if it.is_lit_by_lights() {
+                        lit[n_lit] = k;
+                        n_lit += 1;
+                    }
+                }
+                let lanes = if n_lit > 0 {
+                    let its: [&Interaction; LIGHT_LANES] =
+                        std::array::from_fn(|l| &prepared[lit[l.min(n_lit - 1)]].1);
+                    let lanes = HitLanes::new(&its[..n_lit]);
+                    set_up_shadows(&lanes, &its[..n_lit], lights, &mut per_light);
+                    lanes
+                } else {
+                    HitLanes::default()
+                };
+                let mut lane = 0;
+                for (k, (h, it)) in prepared.iter().enumerate() {
+                    if it.surface.emission != Color::ZERO {
+                        out.emit(h.path, h.throughput * it.surface.emission);
+                    }
+                    if lane < n_lit && lit[lane] == k {
+                        for ll in &per_light {
+                            if ll.lit[lane] {
+                                out.push_shadow(h, ll.query(&lanes, lane));
+                            }
+                        }
+                        lane += 1;
+                    }
+                    if SCATTER {
+                        push_specular(settings, h, it, out);
+                    }
+                    out.end_hit();
+                }
+            }
+            trace_chunk_shadows(scene, through_media, batch, out);
+        }
+    });
+    join_shade_outputs(outputs, to);
+}
+
+/// Every light's shadow queries for the lanes `lanes` (of the
+/// interactions `its`) into `per_light`.
+#[inline]
+fn set_up_shadows(
+    lanes: &HitLanes,
+    its: &[&Interaction],
+    lights: &[WorldLight],
+    per_light: &mut [LightLanes],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2,fma")]
+        fn fast(
+            lanes: &HitLanes,
+            its: &[&Interaction],
+            lights: &[WorldLight],
+            out: &mut [LightLanes],
+        ) {
+            set_up_shadows_with::<true>(lanes, its, lights, out)
+        }
+        if crate::core::simd::use_avx2() {
+            // SAFETY: `use_avx2` holds only on CPUs with AVX2 and FMA.
+            #[allow(unsafe_code)]
+            return unsafe { fast(lanes, its, lights, per_light) };
+        }
+    }
+    set_up_shadows_with::<false>(lanes, its, lights, per_light)
+}
+
+/// [`set_up_shadows`]'s body, inlined into each of its code paths (the
+/// lane loop compiles to 8-wide AVX or to 4-wide SSE2 code, with the same
+/// results).
+#[inline(always)]
+fn set_up_shadows_with<const AVX: bool>(
+    lanes: &HitLanes,
+    its: &[&Interaction],
+    lights: &[WorldLight],
+    per_light: &mut [LightLanes],
+) {
+    for (light, out) in lights.iter().zip(per_light.iter_mut()) {
+        if let WorldLight::Point {
+            position,
+            intensity,
+        } = *light
+        {
+            direct_point_lights::<AVX>(lanes, position, intensity, out);
+            continue;
+        }
+        for (l, it) in its.iter().enumerate() {
+            let q = direct_light(it, light);
+            out.lit[l] = q.is_some();
+            if let Some(q) = q {
+                for a in 0..3 {
+                    out.wi[a][l] = q.ray.direction[a];
+                    out.radiance[a][l] = q.radiance[a];
+                }
+                out.t_max[l] = q.t_max;
+            }
+        }
+    }
 }
 
 /// Stage, path transport: shades every hit of one material class. Each
