@@ -60,7 +60,7 @@ pub const LIGHT_LANES: usize = 8;
 /// Up to [`LIGHT_LANES`] hits of the local shading model, side by side
 /// (structure of arrays), for [`direct_point_lights`]: what
 /// [`direct_light`] reads of each [`Interaction`], and the shadow rays'
-/// offset origin. Unused lanes hold copies of lane 0.
+/// offset origin.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HitLanes {
     /// Hit points, per axis.
@@ -81,30 +81,39 @@ pub struct HitLanes {
     pub shininess: [f32; LIGHT_LANES],
     /// Whether the hit has a specular lobe (`specular.max_element() > 0`).
     pub glossy: [bool; LIGHT_LANES],
+    /// Lanes in use (the first `count`); the others are never lit.
+    pub count: usize,
 }
 
 impl HitLanes {
-    /// The lanes of `its` (at most [`LIGHT_LANES`], at least one).
+    /// The lanes of `its` (at most [`LIGHT_LANES`]).
     pub fn new(its: &[&Interaction]) -> Self {
-        debug_assert!(!its.is_empty() && its.len() <= LIGHT_LANES);
         let mut h = HitLanes::default();
-        for l in 0..LIGHT_LANES {
-            let it = its[if l < its.len() { l } else { 0 }];
-            let origin = it.offset(it.ng);
-            let s = &it.surface;
-            for a in 0..3 {
-                h.point[a][l] = it.point[a];
-                h.ng[a][l] = it.ng[a];
-                h.ns[a][l] = it.ns[a];
-                h.wo[a][l] = it.wo[a];
-                h.origin[a][l] = origin[a];
-                h.diffuse[a][l] = s.diffuse[a];
-                h.specular[a][l] = s.specular[a];
-            }
-            h.shininess[l] = s.shininess;
-            h.glossy[l] = s.specular.max_element() > 0.0;
+        for it in its {
+            h.push(it);
         }
         h
+    }
+
+    /// Puts `it` in the next lane (at most [`LIGHT_LANES`]).
+    #[inline(always)]
+    pub fn push(&mut self, it: &Interaction) {
+        let l = self.count;
+        debug_assert!(l < LIGHT_LANES);
+        let origin = it.offset(it.ng);
+        let s = &it.surface;
+        for a in 0..3 {
+            self.point[a][l] = it.point[a];
+            self.ng[a][l] = it.ng[a];
+            self.ns[a][l] = it.ns[a];
+            self.wo[a][l] = it.wo[a];
+            self.origin[a][l] = origin[a];
+            self.diffuse[a][l] = s.diffuse[a];
+            self.specular[a][l] = s.specular[a];
+        }
+        self.shininess[l] = s.shininess;
+        self.glossy[l] = s.specular.max_element() > 0.0;
+        self.count += 1;
     }
 }
 
@@ -208,7 +217,8 @@ fn direct_point_lights_portable(
         let cos_h = if cos_h > 0.0 { cos_h } else { 0.0 };
         let s = hits.shininess[l];
         let glossy = hits.glossy[l];
-        let lit = dist2 > 0.0 && dist2.is_finite() && dot(ng, wi) > 0.0 && cos_i > 0.0;
+        let lit =
+            l < hits.count && dist2 > 0.0 && dist2.is_finite() && dot(ng, wi) > 0.0 && cos_i > 0.0;
         let lobe = if glossy && lit {
             (s + 8.0) / NORM * cos_h.powf(s)
         } else {
@@ -312,7 +322,8 @@ unsafe fn direct_point_lights_avx2(
             }
         });
         let glossy = ld(&glossy);
-        let need = _mm256_movemask_ps(_mm256_and_ps(lit, glossy)) as u32;
+        let used = (1u32 << hits.count) - 1;
+        let need = _mm256_movemask_ps(_mm256_and_ps(lit, glossy)) as u32 & used;
         let mut lobe = [0.0f32; LIGHT_LANES];
         if need != 0 {
             let c: [f32; LIGHT_LANES] = bytemuck::cast(cos_h);
@@ -339,7 +350,7 @@ unsafe fn direct_point_lights_avx2(
             _mm256_sub_ps(_mm256_add_ps(p[a], _mm256_mul_ps(wi[a], dist)), o[a])
         });
         let t_max = _mm256_mul_ps(_mm256_sqrt_ps(dot(e, e)), _mm256_set1_ps(1.0 - 1e-5));
-        let bits = _mm256_movemask_ps(lit) as u32;
+        let bits = _mm256_movemask_ps(lit) as u32 & used;
         out.lit = std::array::from_fn(|l| bits & (1 << l) != 0);
         out.t_max = bytemuck::cast(t_max);
         for a in 0..3 {

@@ -100,6 +100,25 @@ fn both_integrators_give_the_same_image_on_every_scene() {
     }
 }
 
+/// Under Whitted transport a scene of two or more point lights shades
+/// its hits in lanes (eight hits of one material class, each light's
+/// shadow rays set up side by side: `shade_lit_in_lanes`); its image is
+/// the recursive tracer's bit for bit, on the SIMD path this CPU takes.
+#[test]
+fn point_lights_in_lanes_give_the_recursive_image_bit_for_bit() {
+    let path = assets().join("bench/many_lights.toml");
+    let s = settings(64, 48, 2);
+    let rec = render(&path, IntegratorKind::Recursive, &s, 1000);
+    let wav = render(&path, IntegratorKind::Wavefront, &s, 1001);
+    let (rec, wav) = (rec.film.unwrap(), wav.film.unwrap());
+    assert!(rec.pixels.iter().filter(|p| p.max_element() > 0.05).count() > 1000);
+    assert_eq!(
+        film_bits(&rec),
+        film_bits(&wav),
+        "many_lights: images differ"
+    );
+}
+
 #[test]
 fn test_scenes_match_too() {
     // The analytic scenes of tests/render/analytic.rs, through both integrators.

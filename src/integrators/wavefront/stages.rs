@@ -597,7 +597,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    if LIT && settings.style != Style::Gooch && !scene.lights().is_empty() {
+    if LIT && settings.style != Style::Gooch && point_lights(scene) >= LANES_MIN_POINT_LIGHTS {
         return shade_lit_in_lanes::<SCATTER>(scene, settings, input, scratch, to);
     }
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
@@ -620,6 +620,25 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
             push_specular(settings, h, it, out);
         }
     });
+}
+
+/// Point lights from which [`shade`] sets up shadow rays in lanes
+/// ([`shade_lit_in_lanes`]). Measured (2-core AMD EPYC, AVX2, wavefront,
+/// 2 threads, `examples/measure/ab_wall.sh`, 7-9 alternating renders
+/// against the per-hit kernel): `many_lights` with its first 2, 4, 8, 16
+/// and all 48 point lights 0.91-0.97x, 0.90x, 0.94x, 0.87x and 0.86x the
+/// time; with one point light 0.88x and 1.01x in two runs, and
+/// `quadrics` (one point and one spot light) 1.03-1.08x: filling the
+/// lanes costs about what one light's scalar set-up does.
+pub const LANES_MIN_POINT_LIGHTS: usize = 2;
+
+/// The scene's point lights.
+fn point_lights(scene: &RenderScene) -> usize {
+    scene
+        .lights()
+        .iter()
+        .filter(|l| matches!(l, WorldLight::Point { .. }))
+        .count()
 }
 
 /// Pushes the reflection and refraction rays of a Whitted hit above the
@@ -671,50 +690,49 @@ fn shade_lit_in_lanes<const SCATTER: bool>(
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
         out.clear();
         let mut per_light = vec![LightLanes::default(); lights.len()];
-        let mut prepared: Vec<(HitItem, Interaction)> = Vec::with_capacity(LIGHT_LANES);
+        // Reused: lanes past `count` keep old values, which no one reads.
+        let mut lanes = HitLanes::default();
         for group in hits.ray[range].chunks(SHADOW_GROUP) {
             for sub in group.chunks(LIGHT_LANES) {
-                prepared.clear();
-                for &i in sub {
+                // Each hit's emission and specular rays go out at once (their
+                // queues' order is the per-hit kernel's); the lit hits'
+                // lanes are filled, with the queries of lights other than
+                // point lights made hit by hit.
+                lanes.count = 0;
+                let mut lit_hit = [(0u32, Color::ZERO); LIGHT_LANES];
+                let mut lit_at = [usize::MAX; LIGHT_LANES];
+                for (k, &i) in sub.iter().enumerate() {
                     let i = i as usize;
                     let Some(hit) = &found.0[i] else {
                         debug_assert!(false, "ray {i} is queued for shading without a hit");
                         continue;
                     };
-                    prepared.push(prepare_hit(scene, settings, hit, &rays.get(i)));
-                }
-                let mut lit = [0usize; LIGHT_LANES];
-                let mut n_lit = 0;
-                for (k, (_, it)) in prepared.iter().enumerate() {
-                    if it.is_lit_by_lights() {
-                        lit[n_lit] = k;
-                        n_lit += 1;
-                    }
-                }
-                let lanes = if n_lit > 0 {
-                    let its: [&Interaction; LIGHT_LANES] =
-                        std::array::from_fn(|l| &prepared[lit[l.min(n_lit - 1)]].1);
-                    let lanes = HitLanes::new(&its[..n_lit]);
-                    set_up_shadows(&lanes, &its[..n_lit], lights, &mut per_light);
-                    lanes
-                } else {
-                    HitLanes::default()
-                };
-                let mut lane = 0;
-                for (k, (h, it)) in prepared.iter().enumerate() {
+                    let (h, it) = prepare_hit(scene, settings, hit, &rays.get(i));
                     if it.surface.emission != Color::ZERO {
                         out.emit(h.path, h.throughput * it.surface.emission);
                     }
-                    if lane < n_lit && lit[lane] == k {
-                        for ll in &per_light {
-                            if ll.lit[lane] {
-                                out.push_shadow(h, ll.query(&lanes, lane));
-                            }
-                        }
-                        lane += 1;
+                    if it.is_lit_by_lights() {
+                        let l = lanes.count;
+                        lit_at[k] = l;
+                        lit_hit[l] = (h.path, h.throughput);
+                        lanes.push(&it);
+                        set_up_other_lights(&it, l, lights, &mut per_light);
                     }
                     if SCATTER {
-                        push_specular(settings, h, it, out);
+                        push_specular(settings, &h, &it, out);
+                    }
+                }
+                if lanes.count > 0 {
+                    set_up_point_lights(&lanes, lights, &mut per_light);
+                }
+                for &l in &lit_at[..sub.len()] {
+                    if l != usize::MAX {
+                        let (path, throughput) = lit_hit[l];
+                        for ll in &per_light {
+                            if ll.lit[l] {
+                                out.push_shadow_from(path, throughput, ll.query(&lanes, l));
+                            }
+                        }
                     }
                     out.end_hit();
                 }
@@ -725,42 +743,54 @@ fn shade_lit_in_lanes<const SCATTER: bool>(
     join_shade_outputs(outputs, to);
 }
 
-/// Every light's shadow queries for the lanes `lanes` (of the
-/// interactions `its`) into `per_light`.
+/// The shadow queries of lane `l` (interaction `it`) for the lights that
+/// are not point lights, one by one with [`direct_light`].
 #[inline]
-fn set_up_shadows(
-    lanes: &HitLanes,
-    its: &[&Interaction],
+fn set_up_other_lights(
+    it: &Interaction,
+    l: usize,
     lights: &[WorldLight],
     per_light: &mut [LightLanes],
 ) {
+    for (light, out) in lights.iter().zip(per_light.iter_mut()) {
+        if matches!(light, WorldLight::Point { .. }) {
+            continue;
+        }
+        let q = direct_light(it, light);
+        out.lit[l] = q.is_some();
+        if let Some(q) = q {
+            for a in 0..3 {
+                out.wi[a][l] = q.ray.direction[a];
+                out.radiance[a][l] = q.radiance[a];
+            }
+            out.t_max[l] = q.t_max;
+        }
+    }
+}
+
+/// The shadow queries of every point light for the lanes `lanes`, side
+/// by side ([`direct_point_lights`]), into `per_light`.
+#[inline]
+fn set_up_point_lights(lanes: &HitLanes, lights: &[WorldLight], per_light: &mut [LightLanes]) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2,fma")]
-        fn fast(
-            lanes: &HitLanes,
-            its: &[&Interaction],
-            lights: &[WorldLight],
-            out: &mut [LightLanes],
-        ) {
-            set_up_shadows_with::<true>(lanes, its, lights, out)
+        fn fast(lanes: &HitLanes, lights: &[WorldLight], out: &mut [LightLanes]) {
+            point_lights_with::<true>(lanes, lights, out)
         }
         if crate::core::simd::use_avx2() {
             // SAFETY: `use_avx2` holds only on CPUs with AVX2 and FMA.
             #[allow(unsafe_code)]
-            return unsafe { fast(lanes, its, lights, per_light) };
+            return unsafe { fast(lanes, lights, per_light) };
         }
     }
-    set_up_shadows_with::<false>(lanes, its, lights, per_light)
+    point_lights_with::<false>(lanes, lights, per_light)
 }
 
-/// [`set_up_shadows`]'s body, inlined into each of its code paths (the
-/// lane loop compiles to 8-wide AVX or to 4-wide SSE2 code, with the same
-/// results).
+/// [`set_up_point_lights`]'s body, inlined into each of its code paths.
 #[inline(always)]
-fn set_up_shadows_with<const AVX: bool>(
+fn point_lights_with<const AVX: bool>(
     lanes: &HitLanes,
-    its: &[&Interaction],
     lights: &[WorldLight],
     per_light: &mut [LightLanes],
 ) {
@@ -771,18 +801,6 @@ fn set_up_shadows_with<const AVX: bool>(
         } = *light
         {
             direct_point_lights::<AVX>(lanes, position, intensity, out);
-            continue;
-        }
-        for (l, it) in its.iter().enumerate() {
-            let q = direct_light(it, light);
-            out.lit[l] = q.is_some();
-            if let Some(q) = q {
-                for a in 0..3 {
-                    out.wi[a][l] = q.ray.direction[a];
-                    out.radiance[a][l] = q.radiance[a];
-                }
-                out.t_max[l] = q.t_max;
-            }
         }
     }
 }
