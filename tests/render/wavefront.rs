@@ -100,7 +100,7 @@ fn both_integrators_give_the_same_image_on_every_scene() {
     }
 }
 
-/// Under Whitted transport a scene of two or more point lights shades
+/// Under Whitted transport a scene of `LANES_MIN_POINT_LIGHTS` (8) or more point lights shades
 /// its hits in lanes (eight hits of one material class, each light's
 /// shadow rays set up side by side: `shade_lit_in_lanes`); its image is
 /// the recursive tracer's bit for bit, on the SIMD path this CPU takes.

@@ -623,14 +623,15 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 }
 
 /// Point lights from which [`shade`] sets up shadow rays in lanes
-/// ([`shade_lit_in_lanes`]). Measured (2-core AMD EPYC, AVX2, wavefront,
-/// 2 threads, `examples/measure/ab_wall.sh`, 7-9 alternating renders
-/// against the per-hit kernel): `many_lights` with its first 2, 4, 8, 16
-/// and all 48 point lights 0.91-0.97x, 0.90x, 0.94x, 0.87x and 0.86x the
-/// time; with one point light 0.88x and 1.01x in two runs, and
-/// `quadrics` (one point and one spot light) 1.03-1.08x: filling the
-/// lanes costs about what one light's scalar set-up does.
-pub const LANES_MIN_POINT_LIGHTS: usize = 2;
+/// ([`shade_lit_in_lanes`]): filling the lanes costs about what setting
+/// up a few lights' rays one hit at a time does, and the Blinn-Phong
+/// power stays one `powf` per lane. Measured on the 2-core AMD EPYC
+/// (AVX2), wavefront, 2 threads, 8 spp, 5 alternating renders against the
+/// per-hit kernel (`examples/measure/ab_wall.sh`): `many_lights` with its
+/// first 2, 4, 8 and 16 point lights 1.067x, 1.005x, 0.980x and 0.947x
+/// the time, all 48 at 4 spp 0.953x; `diffuse_only` (two point lights,
+/// no highlight) 1.107x at 16 spp.
+pub const LANES_MIN_POINT_LIGHTS: usize = 8;
 
 /// The scene's point lights.
 fn point_lights(scene: &RenderScene) -> usize {
