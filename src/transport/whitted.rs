@@ -149,9 +149,10 @@ impl LightLanes {
 }
 
 /// [`direct_light`] of a point light at `position` of intensity
-/// `intensity` for every lane of `hits`, in one pass over the lanes that
-/// the compiler turns into SIMD code (no branches, no calls: the
-/// Blinn-Phong power is [`pow_unit`]).
+/// `intensity` for every lane of `hits`: with `AVX` in 8-wide AVX
+/// registers (only inside functions compiled with AVX2, see
+/// [`crate::core::simd`]), else lane by lane. The Blinn-Phong power is
+/// `f32::powf` of each lane whose hit has a highlight and faces the light.
 ///
 /// Each lane performs the IEEE operations of [`direct_light`] with
 /// [`WorldLight::illuminate`] and [`brdf_cos`], in the same order (glam's

@@ -623,7 +623,7 @@ pub fn shade<const LIT: bool, const SCATTER: bool>(
 }
 
 /// Point lights from which [`shade`] sets up shadow rays in lanes
-/// ([`shade_lit_in_lanes`]): filling the lanes costs about what setting
+/// (`shade_lit_in_lanes`): filling the lanes costs about what setting
 /// up a few lights' rays one hit at a time does, and the Blinn-Phong
 /// power stays one `powf` per lane. Measured on the 2-core AMD EPYC
 /// (AVX2), wavefront, 2 threads, 8 spp, 5 alternating renders against the
