@@ -82,7 +82,8 @@ pub struct NodeRay {
     pub fused: bool,
     /// Byte offsets in [`Node8::planes`] of the rows `near` and `far`
     /// name (`32 * row`, each below `6 * 32`): private, so that only
-    /// [`Self::with_magnitude`] writes them, which [`row`] relies on.
+    /// [`Self::with_magnitude`] writes them, which [`Self::near_row`] and
+    /// [`Self::far_row`] rely on.
     near_off: [usize; 3],
     far_off: [usize; 3],
 }
@@ -90,14 +91,16 @@ pub struct NodeRay {
 /// The row of `node.planes` at byte offset `off`, read without a bounds
 /// check or a multiplication by the row size (at every node of every
 /// ray: four fewer instructions per node than indexing by row number).
+///
+/// # Safety
+/// `off` must be 32 times a row number below 6 (a `NodeRay`'s
+/// `near_off` or `far_off`).
 #[inline(always)]
-fn row(node: &Node8, off: usize) -> &[f32; WIDTH] {
+#[allow(unsafe_code)]
+unsafe fn row_at(node: &Node8, off: usize) -> &[f32; WIDTH] {
     debug_assert!(off.is_multiple_of(32) && off < 6 * 32);
-    // SAFETY: `off` is a `near_off` or `far_off` of a `NodeRay`, private
-    // fields set only by `NodeRay::with_magnitude` to 32 times a row
-    // number below 6, so the 32 bytes at `off` are one whole row of the
-    // `[[f32; 8]; 6]` array `planes`, aligned as its rows are.
-    #[allow(unsafe_code)]
+    // SAFETY: by the caller's contract the 32 bytes at `off` are one whole
+    // row of the `[[f32; 8]; 6]` array `planes`, aligned as its rows are.
     unsafe {
         &*node
             .planes
@@ -109,6 +112,27 @@ fn row(node: &Node8, off: usize) -> &[f32; WIDTH] {
 }
 
 impl NodeRay {
+    /// The row of `node`'s near planes on axis `a` (0, 1 or 2).
+    #[inline(always)]
+    pub fn near_row<'a>(&self, node: &'a Node8, a: usize) -> &'a [f32; WIDTH] {
+        // SAFETY: `near_off` is set only by `with_magnitude`, to 32 times a
+        // row number below 6.
+        #[allow(unsafe_code)]
+        unsafe {
+            row_at(node, self.near_off[a])
+        }
+    }
+
+    /// The row of `node`'s far planes on axis `a` (0, 1 or 2).
+    #[inline(always)]
+    pub fn far_row<'a>(&self, node: &'a Node8, a: usize) -> &'a [f32; WIDTH] {
+        // SAFETY: as in `near_row`.
+        #[allow(unsafe_code)]
+        unsafe {
+            row_at(node, self.far_off[a])
+        }
+    }
+
     /// Prepares `ray` for the nodes of `bvh`.
     #[inline(always)]
     pub fn new(ray: &Ray, bvh: &Bvh8) -> Self {
@@ -225,8 +249,8 @@ impl NodeRay {
             let mut tn = [_mm256_setzero_ps(); 3];
             let mut tf = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
-                let near: __m256 = bytemuck::cast(*row(node, self.near_off[a]));
-                let far: __m256 = bytemuck::cast(*row(node, self.far_off[a]));
+                let near: __m256 = bytemuck::cast(*self.near_row(node, a));
+                let far: __m256 = bytemuck::cast(*self.far_row(node, a));
                 let inv = _mm256_set1_ps(self.inv[a]);
                 tn[a] = _mm256_fmsub_ps(near, inv, _mm256_set1_ps(self.o_inv[0][a]));
                 tf[a] = _mm256_fmsub_ps(far, inv, _mm256_set1_ps(self.o_inv[1][a]));
@@ -253,8 +277,8 @@ impl NodeRay {
         let mut enter = [Vec4::splat(t_min); 2];
         let mut exit = [Vec4::splat(t_max); 2];
         for a in 0..3 {
-            let near = row(node, self.near_off[a]);
-            let far = row(node, self.far_off[a]);
+            let near = self.near_row(node, a);
+            let far = self.far_row(node, a);
             let on = Vec4::splat(self.o_near[a]);
             let of = Vec4::splat(self.o_far[a]);
             let inv = Vec4::splat(self.inv[a]);
@@ -294,8 +318,8 @@ impl NodeRay {
             let mut enter = _mm256_set1_ps(t_min);
             let mut exit = _mm256_set1_ps(t_max);
             for a in 0..3 {
-                let near: __m256 = bytemuck::cast(*row(node, self.near_off[a]));
-                let far: __m256 = bytemuck::cast(*row(node, self.far_off[a]));
+                let near: __m256 = bytemuck::cast(*self.near_row(node, a));
+                let far: __m256 = bytemuck::cast(*self.far_row(node, a));
                 let inv = _mm256_set1_ps(self.inv[a]);
                 let tn = _mm256_mul_ps(_mm256_sub_ps(near, _mm256_set1_ps(self.o_near[a])), inv);
                 let tf = _mm256_mul_ps(_mm256_sub_ps(far, _mm256_set1_ps(self.o_far[a])), inv);
