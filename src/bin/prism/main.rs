@@ -4,6 +4,11 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+/// Large blocks (BVH builds, films, photon maps) on transparent huge pages:
+/// fewer page faults (see `prism::core::alloc`).
+#[global_allocator]
+static ALLOC: prism::core::alloc::HugePageAlloc = prism::core::alloc::HugePageAlloc;
+
 /// Prism: a data-oriented Whitted ray tracer whose scene is an ECS world.
 #[derive(Parser, Debug)]
 #[command(name = "prism", version, about, long_about = None)]
