@@ -4,7 +4,7 @@
 
 use glam::Vec3A;
 
-use crate::accel::packet::{self, ALL_LANES, LANES, LaneMask, Packet, PacketOf, for_each_lane};
+use crate::accel::packet::{self, LANES, LaneMask, Packet, PacketOf, for_each_lane};
 use crate::accel::packet16::{LANES16, Packet16, PacketTraversal};
 use crate::accel::single::traverse_bvh;
 use crate::core::math::{Ray, one_octant};
@@ -213,6 +213,15 @@ impl RenderScene {
         /// [`RenderScene::intersect_coherent`] takes packets of 8.
         pub fn intersect_packet16(&self, rays: &[Ray], out: &mut [Option<Hit>]) -> ()
             => RenderScene, intersect_packet16_kernel
+    }
+
+    crate::simd_entry_wide! {
+        /// For up to [`LANES16`] segments `(0, t_max[l])` along `rays`, the
+        /// mask of those blocked by anything, by packet traversal in
+        /// packets of 16 ([`crate::accel::packet16`]): the answers of
+        /// [`RenderScene::occluded`] on each, on every SIMD path.
+        pub fn occluded_packet16(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask
+            => RenderScene, occluded_packet16_kernel
     }
 
     crate::simd_entry! {
@@ -510,6 +519,36 @@ impl RenderScene {
         }
     }
 
+    /// For up to [`COHERENT_LANES`] neighbouring segments `(0, t_max[l])`
+    /// along `rays` (shadow rays of neighbouring pixels towards one
+    /// light), the mask of those blocked, traced as
+    /// [`RenderScene::intersect_coherent`] traces rays: one packet of 16
+    /// on the AVX-512 path, packets of 8 otherwise, a group still mixed
+    /// (or of one ray) ray by ray. The answers of [`RenderScene::occluded`].
+    pub fn occluded_coherent(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+        let n = rays.len().min(COHERENT_LANES);
+        let (rays, t_max) = (&rays[..n], &t_max[..n]);
+        if crate::accel::simd::use_avx512() && n > LANES && one_octant(rays) {
+            return self.occluded_packet16(rays, t_max);
+        }
+        let mut blocked: LaneMask = 0;
+        for (c, (rays, t_max)) in rays.chunks(LANES).zip(t_max.chunks(LANES)).enumerate() {
+            let b = if rays.len() > 1 && one_octant(rays) {
+                self.occluded_packet(rays, t_max)
+            } else {
+                let mut b = 0;
+                for (j, (r, &t)) in rays.iter().zip(t_max).enumerate() {
+                    if self.occluded(r, 0.0, t) {
+                        b |= 1 << j;
+                    }
+                }
+                b
+            };
+            blocked |= b << (c * LANES);
+        }
+        blocked
+    }
+
     #[inline(always)]
     fn intersect_stream_kernel<const AVX: bool>(
         &self,
@@ -599,7 +638,46 @@ impl RenderScene {
         t_max: &[f32],
         mesh_packets: bool,
     ) -> LaneMask {
-        let n = rays.len().min(LANES);
+        self.occluded_packet_of::<LANES, AVX, false>(
+            rays,
+            t_max,
+            mesh_packets,
+            #[inline(always)]
+            |m, p, lanes| m.occluded_packet_kernel::<AVX>(p, lanes),
+        )
+    }
+
+    #[inline(always)]
+    fn occluded_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+    ) -> LaneMask {
+        self.occluded_packet_of::<LANES16, AVX, AVX512>(
+            rays,
+            t_max,
+            true,
+            #[inline(always)]
+            |m, p, lanes| m.occluded_packet16_kernel::<AVX, AVX512>(p, lanes),
+        )
+    }
+
+    /// The occlusion query of packets of `N` lanes (8 or 16, as
+    /// [`Self::top_level_packet`]); the lanes of a packet that reach a
+    /// mesh go through it as one packet, `mesh_packet(mesh, packet,
+    /// lanes)` (when `mesh_packets`), or one lane at a time.
+    #[inline(always)]
+    fn occluded_packet_of<const N: usize, const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+        mesh_packets: bool,
+        mut mesh_packet: impl FnMut(&Mesh, &mut PacketOf<N>, LaneMask) -> LaneMask,
+    ) -> LaneMask
+    where
+        PacketOf<N>: PacketTraversal,
+    {
+        let n = rays.len().min(N);
         let mut blocked: LaneMask = 0;
         // Plain loops, as in `occluded_kernel` (no out-of-line closure).
         for (l, ray) in rays[..n].iter().enumerate() {
@@ -610,12 +688,11 @@ impl RenderScene {
                 }
             }
         }
-        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
-        let todo = ALL_LANES & !blocked;
+        let mut packet = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+        let todo = packet.valid & !blocked;
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX>(
+        packet.traverse_bvh::<AVX, AVX512>(
             bvh,
-            &mut packet,
             todo,
             #[inline(always)]
             |p, lanes, leaf| {
@@ -673,7 +750,7 @@ impl RenderScene {
                             now
                         }
                         InstanceGeometry::Mesh(m) => {
-                            let mut local = Packet::new(&[], &[], &[]);
+                            let mut local = PacketOf::<N>::new(&[], &[], &[]);
                             for_each_lane(
                                 lanes,
                                 #[inline(always)]
@@ -686,7 +763,7 @@ impl RenderScene {
                                     )
                                 },
                             );
-                            m.occluded_packet_kernel::<AVX>(&mut local, lanes)
+                            mesh_packet(m, &mut local, lanes)
                         }
                     };
                     found |= now;
