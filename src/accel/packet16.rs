@@ -217,6 +217,46 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
     }
 }
 
+/// A packet width with a traversal of its own: lets code written once
+/// for packets of `N` lanes (the scene's top level,
+/// [`crate::scene::RenderScene`]) run [`crate::accel::packet::traverse`]
+/// on packets of 8 and [`traverse16`] on packets of 16.
+pub trait PacketTraversal: Sized {
+    /// Visits the leaves of `bvh` that the lanes in `active` reach, as
+    /// [`traverse16`] does (`AVX512` is ignored by packets of 8).
+    fn traverse_bvh<const AVX: bool, const AVX512: bool>(
+        &mut self,
+        bvh: &Bvh8,
+        active: LaneMask,
+        leaf: impl FnMut(&mut Self, LaneMask, u32) -> LaneMask,
+    );
+}
+
+impl PacketTraversal for crate::accel::packet::Packet {
+    #[inline(always)]
+    fn traverse_bvh<const AVX: bool, const AVX512: bool>(
+        &mut self,
+        bvh: &Bvh8,
+        active: LaneMask,
+        leaf: impl FnMut(&mut Self, LaneMask, u32) -> LaneMask,
+    ) {
+        // The top level keeps the lane tests alone (see `packet::traverse`).
+        crate::accel::packet::traverse::<AVX, false>(bvh, self, active, leaf);
+    }
+}
+
+impl PacketTraversal for Packet16 {
+    #[inline(always)]
+    fn traverse_bvh<const AVX: bool, const AVX512: bool>(
+        &mut self,
+        bvh: &Bvh8,
+        active: LaneMask,
+        leaf: impl FnMut(&mut Self, LaneMask, u32) -> LaneMask,
+    ) {
+        traverse16::<AVX, AVX512>(bvh, self, active, leaf);
+    }
+}
+
 /// The lanes whose `t_max` is at least `near`.
 #[inline(always)]
 fn not_beyond<const AVX512: bool>(near: f32, t_max: &[f32; LANES16]) -> LaneMask {

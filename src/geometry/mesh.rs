@@ -913,6 +913,71 @@ impl Mesh {
         blocked
     }
 
+    /// [`Self::occluded_packet_kernel`] for packets of 16
+    /// ([`crate::accel::packet16`]): the lanes of `packet` in `lanes` that
+    /// hit any triangle within their intervals, each lane's leaves tested
+    /// with the single-ray kernel (shadow rays from different points share
+    /// no frame).
+    #[inline(always)]
+    pub(crate) fn occluded_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        packet: &mut Packet16,
+        lanes: LaneMask,
+    ) -> LaneMask {
+        let lanes = lanes & packet.valid;
+        if !matches!(self.structure, Structure::Bvh) {
+            let mut blocked = 0;
+            for_each_lane(
+                lanes,
+                #[inline(always)]
+                |l| {
+                    if self.occluded_kernel::<AVX>(
+                        &packet.rays[l],
+                        packet.t_min[l],
+                        packet.t_max[l],
+                    ) {
+                        blocked |= 1 << l;
+                    }
+                },
+            );
+            return blocked;
+        }
+        if lanes == 0 {
+            return 0;
+        }
+        // (A loop rather than `std::array::from_fn`, whose closure is not
+        // inlined into the entry point.)
+        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES16];
+        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+            *w = WatertightRay::new(r);
+        }
+        let mut blocked = 0;
+        crate::accel::packet16::traverse16::<AVX, AVX512>(
+            &self.bvh,
+            packet,
+            lanes,
+            #[inline(always)]
+            |p, hit, leaf| {
+                let mut now = 0;
+                for_each_lane(
+                    hit,
+                    #[inline(always)]
+                    |l| {
+                        if self
+                            .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
+                            .is_some()
+                        {
+                            now |= 1 << l;
+                        }
+                    },
+                );
+                blocked |= now;
+                now
+            },
+        );
+        blocked
+    }
+
     /// Closest hits of every ray of `stream` (object space), by stream
     /// traversal ([`crate::accel::stream`]): `best[i]` is ray `i`'s nearest hit
     /// inside its interval, as [`Mesh::intersect`] finds it. `wt` is a

@@ -1,18 +1,19 @@
 //! The recursive tracer: depth-first. Whitted transport traces the camera
-//! rays of eight neighbouring pixels and their shadow rays as packets
+//! rays of sixteen neighbouring pixels and their shadow rays as packets
 //! (`trace_camera_packet`) and recurses into each specular ray one at a
 //! time; path transport follows one ray per bounce in a loop.
 
 use rayon::prelude::*;
 
 use super::{Progress, accumulate, camera_ray, camera_rays};
-use crate::accel::packet::{LANES, LaneMask, for_each_lane};
-use crate::core::math::{Color, Ray, RayCone, max_component, one_octant};
+use crate::accel::packet::{LaneMask, for_each_lane};
+use crate::core::math::{Color, Ray, RayCone, max_component};
 use crate::core::rng::Sampler;
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::image::film::{Film, PixelAccumulator, PixelSum};
 use crate::integrators::counters::RenderCounters;
 use crate::scene::camera::{Camera, CameraRays};
+use crate::scene::query::COHERENT_LANES;
 use crate::scene::{Hit, RenderScene};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
@@ -146,11 +147,13 @@ fn add_specular(
     }
 }
 
-/// [`trace`] of up to [`LANES`] camera rays (cone `cone`, depth 0) into
-/// `out`: the same radiance on each, bit for bit. The camera rays go
-/// through the scene as one packet, and so do the shadow rays of their
-/// hits towards each light in turn (neighbouring pixels' shadow rays to
-/// one light share most of the nodes they visit); packets whose rays
+/// [`trace`] of up to [`COHERENT_LANES`] camera rays (cone `cone`, depth
+/// 0) into `out`: the same radiance on each, bit for bit. The camera rays
+/// go through the scene together ([`RenderScene::intersect_coherent`]: one
+/// packet of 16 on the AVX-512 path, packets of 8 elsewhere), and so do
+/// the shadow rays of their hits towards each light in turn
+/// ([`RenderScene::occluded_coherent`]; neighbouring pixels' shadow rays
+/// to one light share most of the nodes they visit); packets whose rays
 /// point into different octants are traced ray by ray, and specular rays
 /// one at a time.
 ///
@@ -168,18 +171,12 @@ fn trace_camera_packet(
     out: &mut [Color],
 ) {
     let n = rays.len();
-    let mut its: [Option<Interaction>; LANES] = [None; LANES];
-    let mut interior: [Option<Color>; LANES] = [None; LANES];
-    let mut throughput = [Color::ONE; LANES];
+    let mut its: [Option<Interaction>; COHERENT_LANES] = [None; COHERENT_LANES];
+    let mut interior: [Option<Color>; COHERENT_LANES] = [None; COHERENT_LANES];
+    let mut throughput = [Color::ONE; COHERENT_LANES];
     let mut shadowed: LaneMask = 0;
-    let mut hits = [None; LANES];
-    if one_octant(rays) {
-        scene.intersect_packet(rays, &mut hits[..n]);
-    } else {
-        for (h, r) in hits.iter_mut().zip(rays) {
-            *h = scene.intersect(r, 0.0, f32::INFINITY);
-        }
-    }
+    let mut hits = [None; COHERENT_LANES];
+    scene.intersect_coherent(rays, &mut hits[..n]);
     for l in 0..n {
         let ray = &rays[l];
         let Some(hit) = &hits[l] else {
@@ -199,10 +196,10 @@ fn trace_camera_packet(
     if shadowed != 0 {
         for light in scene.lights() {
             // The lanes with a shadow ray towards this light, packed.
-            let mut lane = [0usize; LANES];
-            let mut shadow_rays = [Ray::new(glam::Vec3A::ZERO, glam::Vec3A::X); LANES];
-            let mut t_max = [0.0f32; LANES];
-            let mut radiance = [Color::ZERO; LANES];
+            let mut lane = [0usize; COHERENT_LANES];
+            let mut shadow_rays = [Ray::new(glam::Vec3A::ZERO, glam::Vec3A::X); COHERENT_LANES];
+            let mut t_max = [0.0f32; COHERENT_LANES];
+            let mut radiance = [Color::ZERO; COHERENT_LANES];
             let mut k = 0;
             for_each_lane(shadowed, |l| {
                 let it = its[l].as_ref().expect("shadowed lanes have a hit");
@@ -218,17 +215,7 @@ fn trace_camera_packet(
             if k == 0 {
                 continue;
             }
-            let blocked: LaneMask = if k > 1 && one_octant(&shadow_rays[..k]) {
-                scene.occluded_packet(&shadow_rays[..k], &t_max[..k])
-            } else {
-                let mut b = 0;
-                for j in 0..k {
-                    if scene.occluded(&shadow_rays[j], 0.0, t_max[j]) {
-                        b |= 1 << j;
-                    }
-                }
-                b
-            };
+            let blocked = scene.occluded_coherent(&shadow_rays[..k], &t_max[..k]);
             for j in 0..k {
                 if blocked & (1 << j) == 0 {
                     out[lane[j]] += radiance[j];
@@ -441,7 +428,8 @@ fn pixel_sum(
     sum
 }
 
-/// The exact sums of the window's samples of the `n` (at most [`LANES`])
+/// The exact sums of the window's samples of the `n` (at most
+/// [`COHERENT_LANES`])
 /// pixels from `(x, y)` along a row, under Whitted transport: each sample
 /// index is traced for all of them as one packet
 /// ([`trace_camera_packet`]). The same sums as [`pixel_sum`] per pixel.
@@ -454,13 +442,13 @@ fn camera_packet_sums(
     n: usize,
     samples: std::ops::Range<u32>,
     counters: &mut RenderCounters,
-) -> [PixelSum; LANES] {
-    let mut sums: [PixelSum; LANES] = Default::default();
+) -> [PixelSum; COHERENT_LANES] {
+    let mut sums: [PixelSum; COHERENT_LANES] = Default::default();
     let spp = settings.spp;
     // Without jitter or lens the camera ray uses no random numbers.
     let fixed = spp == 1 && !cam.has_lens();
     for s in samples {
-        let rays: [Ray; LANES] = std::array::from_fn(|l| {
+        let rays: [Ray; COHERENT_LANES] = std::array::from_fn(|l| {
             let x = x + l.min(n - 1) as u32;
             if fixed {
                 cam.ray(glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
@@ -471,7 +459,7 @@ fn camera_packet_sums(
             }
         });
         counters.rays.camera += n as u64;
-        let mut radiance = [Color::ZERO; LANES];
+        let mut radiance = [Color::ZERO; COHERENT_LANES];
         trace_camera_packet(
             scene,
             settings,
@@ -502,7 +490,7 @@ fn render_rows<T: Send>(
     let map = settings.path_map();
     let window = settings.window();
     let x0 = map.first_column();
-    // Whitted transport traces runs of eight pixels of a row as packets
+    // Whitted transport traces runs of sixteen pixels of a row as packets
     // (`trace_camera_packet`); the pixels' sums are the same bits.
     let packets = matches!(
         settings.transport,
@@ -513,8 +501,8 @@ fn render_rows<T: Send>(
         .map(|(row, &y)| {
             let mut counters = RenderCounters::default();
             if packets {
-                for (c, run) in row.chunks_mut(LANES).enumerate() {
-                    let x = x0 + (c * LANES) as u32;
+                for (c, run) in row.chunks_mut(COHERENT_LANES).enumerate() {
+                    let x = x0 + (c * COHERENT_LANES) as u32;
                     let sums = camera_packet_sums(
                         scene,
                         settings,

@@ -1,15 +1,20 @@
 //! Intersection queries of a [`RenderScene`]: closest hit and occlusion
-//! for single rays, packets of eight and streams, and the brute-force
-//! reference.
+//! for single rays, packets of eight (and of sixteen, for closest hits of
+//! coherent rays), and streams, and the brute-force reference.
 
 use glam::Vec3A;
 
-use crate::accel::packet::{self, ALL_LANES, LANES, LaneMask, Packet, for_each_lane};
+use crate::accel::packet::{LANES, LaneMask, Packet, PacketOf, for_each_lane};
+use crate::accel::packet16::{LANES16, Packet16, PacketTraversal};
 use crate::accel::single::traverse_bvh;
-use crate::core::math::Ray;
+use crate::core::math::{Ray, one_octant};
 use crate::geometry::mesh::Mesh;
 use crate::scene::instance::{Hit, Instance, InstanceGeometry, LocalHit, to_object};
 use crate::scene::render_scene::RenderScene;
+
+/// Rays per call of [`RenderScene::intersect_coherent`]: one packet of
+/// 16 on the AVX-512 path, two packets of 8 elsewhere.
+pub const COHERENT_LANES: usize = LANES16;
 
 /// Bits of a deferred stream key that hold the ray's index.
 const RAY_BITS: u64 = 0xffff_ffff;
@@ -198,6 +203,27 @@ impl RenderScene {
         ) -> () => RenderScene, intersect_packet_kernel
     }
 
+    crate::simd_entry_wide! {
+        /// Closest hits of up to [`LANES16`] rays at once (each searched in
+        /// `(0, inf)`), by packet traversal of the top-level BVH and of
+        /// mesh BVHs in packets of 16 ([`crate::accel::packet16`]): the
+        /// same hits as [`RenderScene::intersect`] on each ray, bit for bit,
+        /// on every SIMD path. Fastest on the AVX-512 path
+        /// ([`crate::core::simd::Isa::Avx512`]); elsewhere
+        /// [`RenderScene::intersect_coherent`] takes packets of 8.
+        pub fn intersect_packet16(&self, rays: &[Ray], out: &mut [Option<Hit>]) -> ()
+            => RenderScene, intersect_packet16_kernel
+    }
+
+    crate::simd_entry_wide! {
+        /// For up to [`LANES16`] segments `(0, t_max[l])` along `rays`, the
+        /// mask of those blocked by anything, by packet traversal in
+        /// packets of 16 ([`crate::accel::packet16`]): the answers of
+        /// [`RenderScene::occluded`] on each, on every SIMD path.
+        pub fn occluded_packet16(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask
+            => RenderScene, occluded_packet16_kernel
+    }
+
     crate::simd_entry! {
         /// Closest hits of all `rays` (each searched in `(0, inf)`), by
         /// streams: the top level is traversed in packets of eight
@@ -296,22 +322,28 @@ impl RenderScene {
     /// level, on the shapes, into `best`. The lanes of `p` that reach mesh
     /// instance `index` go to `mesh(p, lanes, index, instance, mesh, best)`,
     /// which may record hits in `best` and shrink `p.t_max`.
+    ///
+    /// Written once for packets of `N` lanes: 8 ([`packet::traverse`]) or
+    /// 16 ([`crate::accel::packet16::traverse16`], whose AVX-512 child test
+    /// `AVX512` selects).
     #[inline(always)]
-    fn top_level_packet<const AVX: bool>(
+    fn top_level_packet<const N: usize, const AVX: bool, const AVX512: bool>(
         &self,
         rays: &[Ray],
         best: &mut [Option<(f32, u32, LocalHit)>],
         mut mesh: impl FnMut(
-            &mut Packet,
+            &mut PacketOf<N>,
             LaneMask,
             u32,
             &Instance,
             &Mesh,
             &mut [Option<(f32, u32, LocalHit)>],
         ),
-    ) {
-        let n = rays.len().min(LANES);
-        let mut t_max = [f32::INFINITY; LANES];
+    ) where
+        PacketOf<N>: PacketTraversal,
+    {
+        let n = rays.len().min(N);
+        let mut t_max = [f32::INFINITY; N];
         for (l, ray) in rays[..n].iter().enumerate() {
             for &i in &self.tlas.unbounded {
                 if let Some((t, h)) = self.intersect_instance::<AVX>(i, ray, 0.0, t_max[l]) {
@@ -320,12 +352,12 @@ impl RenderScene {
                 }
             }
         }
-        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
+        let mut packet = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX, false>(
+        let all = packet.valid;
+        packet.traverse_bvh::<AVX, AVX512>(
             bvh,
-            &mut packet,
-            ALL_LANES,
+            all,
             #[inline(always)]
             |p, lanes, leaf| {
                 let lf = bvh.leaves[leaf as usize];
@@ -377,7 +409,7 @@ impl RenderScene {
     ) {
         let n = rays.len().min(LANES);
         let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
-        self.top_level_packet::<AVX>(
+        self.top_level_packet::<LANES, AVX, false>(
             rays,
             &mut best,
             #[inline(always)]
@@ -421,6 +453,102 @@ impl RenderScene {
         }
     }
 
+    /// [`Self::intersect_packet_kernel`] for packets of 16: the top level
+    /// and every mesh traversed as one 16-lane packet
+    /// ([`crate::accel::packet16`]).
+    #[inline(always)]
+    fn intersect_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+    ) {
+        let n = rays.len().min(LANES16);
+        let mut best: [Option<(f32, u32, LocalHit)>; LANES16] = [None; LANES16];
+        self.top_level_packet::<LANES16, AVX, AVX512>(
+            rays,
+            &mut best,
+            #[inline(always)]
+            |p, lanes, index, inst, m, best| {
+                let mut local = Packet16::new(&[], &[], &[]);
+                for_each_lane(
+                    lanes,
+                    #[inline(always)]
+                    |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
+                );
+                let mut hits = [None; LANES16];
+                m.intersect_packet16_kernel::<AVX, AVX512>(&mut local, lanes, &mut hits);
+                for_each_lane(
+                    lanes,
+                    #[inline(always)]
+                    |l| {
+                        if let Some(h) = hits[l] {
+                            p.t_max[l] = h.t;
+                            best[l] = Some((h.t, index, LocalHit::Mesh(h)));
+                        }
+                    },
+                );
+            },
+        );
+        for (l, o) in out[..n].iter_mut().enumerate() {
+            *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
+        }
+    }
+
+    /// Closest hits of up to [`COHERENT_LANES`] neighbouring rays (camera
+    /// rays of a run of pixels; each searched in `(0, inf)`), traced the
+    /// fastest way this CPU has: one packet of 16 on the AVX-512 path
+    /// ([`RenderScene::intersect_packet16`]), packets of 8 otherwise
+    /// ([`RenderScene::intersect_packet`]); rays pointing into different
+    /// octants go eight at a time, and a group of eight that is still
+    /// mixed goes ray by ray. Every way gives each ray the hit
+    /// [`RenderScene::intersect`] gives it.
+    pub fn intersect_coherent(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        let rays = &rays[..rays.len().min(COHERENT_LANES)];
+        if crate::core::simd::use_avx512() && one_octant(rays) {
+            self.intersect_packet16(rays, out);
+            return;
+        }
+        for (rays, out) in rays.chunks(LANES).zip(out.chunks_mut(LANES)) {
+            if one_octant(rays) {
+                self.intersect_packet(rays, out);
+            } else {
+                for (o, r) in out.iter_mut().zip(rays) {
+                    *o = self.intersect(r, 0.0, f32::INFINITY);
+                }
+            }
+        }
+    }
+
+    /// For up to [`COHERENT_LANES`] neighbouring segments `(0, t_max[l])`
+    /// along `rays` (shadow rays of neighbouring pixels towards one
+    /// light), the mask of those blocked, traced as
+    /// [`RenderScene::intersect_coherent`] traces rays: one packet of 16
+    /// on the AVX-512 path, packets of 8 otherwise, a group still mixed
+    /// (or of one ray) ray by ray. The answers of [`RenderScene::occluded`].
+    pub fn occluded_coherent(&self, rays: &[Ray], t_max: &[f32]) -> LaneMask {
+        let n = rays.len().min(COHERENT_LANES);
+        let (rays, t_max) = (&rays[..n], &t_max[..n]);
+        if crate::core::simd::use_avx512() && n > LANES && one_octant(rays) {
+            return self.occluded_packet16(rays, t_max);
+        }
+        let mut blocked: LaneMask = 0;
+        for (c, (rays, t_max)) in rays.chunks(LANES).zip(t_max.chunks(LANES)).enumerate() {
+            let b = if rays.len() > 1 && one_octant(rays) {
+                self.occluded_packet(rays, t_max)
+            } else {
+                let mut b = 0;
+                for (j, (r, &t)) in rays.iter().zip(t_max).enumerate() {
+                    if self.occluded(r, 0.0, t) {
+                        b |= 1 << j;
+                    }
+                }
+                b
+            };
+            blocked |= b << (c * LANES);
+        }
+        blocked
+    }
+
     #[inline(always)]
     fn intersect_stream_kernel<const AVX: bool>(
         &self,
@@ -446,22 +574,26 @@ impl RenderScene {
         for (p, packet_rays) in rays.chunks(LANES).enumerate() {
             let first = p * LANES;
             let best = &mut best[first..first + packet_rays.len()];
-            self.top_level_packet::<AVX>(packet_rays, best, |p, lanes, index, inst, _, _| {
-                for_each_lane(
-                    lanes,
-                    #[inline(always)]
-                    |l| {
-                        let d = inst
-                            .transform
-                            .to_object
-                            .transform_vector3a(p.rays[l].direction);
-                        let octant = (d.x < 0.0) as u64
-                            | ((d.y < 0.0) as u64) << 1
-                            | ((d.z < 0.0) as u64) << 2;
-                        deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
-                    },
-                )
-            });
+            self.top_level_packet::<LANES, AVX, false>(
+                packet_rays,
+                best,
+                |p, lanes, index, inst, _, _| {
+                    for_each_lane(
+                        lanes,
+                        #[inline(always)]
+                        |l| {
+                            let d = inst
+                                .transform
+                                .to_object
+                                .transform_vector3a(p.rays[l].direction);
+                            let octant = (d.x < 0.0) as u64
+                                | ((d.y < 0.0) as u64) << 1
+                                | ((d.z < 0.0) as u64) << 2;
+                            deferred.push((index as u64) << 35 | octant << 32 | (first + l) as u64);
+                        },
+                    )
+                },
+            );
         }
         // One stream per (instance, octant), in a fixed order.
         deferred.sort_unstable();
@@ -506,7 +638,46 @@ impl RenderScene {
         t_max: &[f32],
         mesh_packets: bool,
     ) -> LaneMask {
-        let n = rays.len().min(LANES);
+        self.occluded_packet_of::<LANES, AVX, false>(
+            rays,
+            t_max,
+            mesh_packets,
+            #[inline(always)]
+            |m, p, lanes| m.occluded_packet_kernel::<AVX>(p, lanes),
+        )
+    }
+
+    #[inline(always)]
+    fn occluded_packet16_kernel<const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+    ) -> LaneMask {
+        self.occluded_packet_of::<LANES16, AVX, AVX512>(
+            rays,
+            t_max,
+            true,
+            #[inline(always)]
+            |m, p, lanes| m.occluded_packet16_kernel::<AVX, AVX512>(p, lanes),
+        )
+    }
+
+    /// The occlusion query of packets of `N` lanes (8 or 16, as
+    /// [`Self::top_level_packet`]); the lanes of a packet that reach a
+    /// mesh go through it as one packet, `mesh_packet(mesh, packet,
+    /// lanes)` (when `mesh_packets`), or one lane at a time.
+    #[inline(always)]
+    fn occluded_packet_of<const N: usize, const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        t_max: &[f32],
+        mesh_packets: bool,
+        mut mesh_packet: impl FnMut(&Mesh, &mut PacketOf<N>, LaneMask) -> LaneMask,
+    ) -> LaneMask
+    where
+        PacketOf<N>: PacketTraversal,
+    {
+        let n = rays.len().min(N);
         let mut blocked: LaneMask = 0;
         // Plain loops, as in `occluded_kernel` (no out-of-line closure).
         for (l, ray) in rays[..n].iter().enumerate() {
@@ -517,12 +688,11 @@ impl RenderScene {
                 }
             }
         }
-        let mut packet = Packet::new(&rays[..n], &[0.0; LANES][..n], &t_max[..n]);
-        let todo = ALL_LANES & !blocked;
+        let mut packet = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+        let todo = packet.valid & !blocked;
         let bvh = &self.tlas.bvh;
-        packet::traverse::<AVX, false>(
+        packet.traverse_bvh::<AVX, AVX512>(
             bvh,
-            &mut packet,
             todo,
             #[inline(always)]
             |p, lanes, leaf| {
@@ -580,7 +750,7 @@ impl RenderScene {
                             now
                         }
                         InstanceGeometry::Mesh(m) => {
-                            let mut local = Packet::new(&[], &[], &[]);
+                            let mut local = PacketOf::<N>::new(&[], &[], &[]);
                             for_each_lane(
                                 lanes,
                                 #[inline(always)]
@@ -593,7 +763,7 @@ impl RenderScene {
                                     )
                                 },
                             );
-                            m.occluded_packet_kernel::<AVX>(&mut local, lanes)
+                            mesh_packet(m, &mut local, lanes)
                         }
                     };
                     found |= now;

@@ -1,4 +1,4 @@
-//! The portable and the AVX2 code paths of every traversal mode give
+//! The portable, AVX2 and AVX-512 code paths of every traversal mode give
 //! bit-identical hits: same distance, same triangle, same barycentrics,
 //! same instance, on random scenes with meshes and shapes, coherent and
 //! incoherent rays, axis-aligned rays with signed zeros, and rays far from
@@ -9,6 +9,7 @@
 
 use glam::Vec3A;
 use prism::accel::packet::LANES;
+use prism::accel::packet16::LANES16;
 use prism::core::math::Ray;
 use prism::core::simd::{self, Isa};
 use prism::scene::{Hit, RenderScene, StreamScratch};
@@ -42,6 +43,13 @@ fn answers(scene: &RenderScene, rays: &[Ray], t_max: &[f32]) -> Vec<u64> {
             out.extend(bits(h));
         }
         out.push(scene.occluded_packet(chunk, t) as u64);
+    }
+    for chunk in rays.chunks(LANES16) {
+        let mut hits = [None; LANES16];
+        scene.intersect_packet16(chunk, &mut hits);
+        for h in &hits[..chunk.len()] {
+            out.extend(bits(h));
+        }
     }
     let mut scratch = StreamScratch::default();
     let mut hits = vec![None; rays.len()];
@@ -94,13 +102,22 @@ fn portable_and_avx2_paths_give_identical_hits() {
         let portable = answers(&scene, &rays, &t_max);
         assert!(simd::force(Isa::Avx2));
         let avx2 = answers(&scene, &rays, &t_max);
+        // The AVX-512 path (packets of 16 in 16-lane registers), where
+        // the CPU has it.
+        let avx512 = simd::force(Isa::Avx512).then(|| answers(&scene, &rays, &t_max));
         simd::force(simd::detected());
-        assert_eq!(portable.len(), avx2.len());
-        for (i, (a, b)) in portable.iter().zip(&avx2).enumerate() {
-            assert_eq!(
-                a, b,
-                "answer {i} differs between the paths (offset {offset})"
-            );
+        for (name, other) in [("AVX2", Some(avx2)), ("AVX-512", avx512)] {
+            let Some(other) = other else {
+                eprintln!("{name} path skipped: not on this CPU");
+                continue;
+            };
+            assert_eq!(portable.len(), other.len());
+            for (i, (a, b)) in portable.iter().zip(&other).enumerate() {
+                assert_eq!(
+                    a, b,
+                    "answer {i} differs between the portable and {name} paths (offset {offset})"
+                );
+            }
         }
         compared += portable.iter().filter(|&&v| v != u64::MAX).count();
     }

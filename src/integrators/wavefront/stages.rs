@@ -30,6 +30,7 @@ use crate::scene::camera::CameraRays;
 use crate::scene::light::WorldLight;
 use crate::scene::material::MaterialClass;
 use crate::scene::polygons::PolygonBatch;
+use crate::scene::query::COHERENT_LANES;
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::Interaction;
 use crate::transport::medium::interior_transmittance;
@@ -150,20 +151,30 @@ pub fn intersect_closest(
     //
     // A scene of a few polygons skips the top level: eight rays at a
     // time meet every polygon (`PolygonBatch`), the same hits.
+    //
+    // Camera rays (the first bounce: every ray at depth 0) go sixteen at a
+    // time (`RenderScene::intersect_coherent`: one packet of 16 on the
+    // AVX-512 path, packets of 8 elsewhere); later bounces, less coherent,
+    // eight at a time.
     let n = rays.len();
     found.0.resize(n, None);
     let batch = PolygonBatch::new(scene);
+    let camera = batch.is_none() && rays.depth.iter().all(|&d| d == 0);
+    let width = if camera { COHERENT_LANES } else { LANES };
     found
         .0
         .par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, out)| {
-            for (k, lanes) in out.chunks_mut(LANES).enumerate() {
-                let i = c * CHUNK + k * LANES;
+            for (k, lanes) in out.chunks_mut(width).enumerate() {
+                let i = c * CHUNK + k * width;
                 let m = lanes.len();
-                let packet: [Ray; LANES] = std::array::from_fn(|l| rays.ray(i + l.min(m - 1)));
+                let packet: [Ray; COHERENT_LANES] =
+                    std::array::from_fn(|l| rays.ray(i + l.min(m - 1)));
                 if let Some(b) = &batch {
                     b.intersect(scene, &packet[..m], lanes);
+                } else if camera {
+                    scene.intersect_coherent(&packet[..m], lanes);
                 } else if one_octant(&packet[..m]) {
                     scene.intersect_packet_with(&packet[..m], lanes, true);
                 } else {
