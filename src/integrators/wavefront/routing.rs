@@ -16,7 +16,7 @@
 //! [`drain`](crate::integrators::wavefront::drain)); [`join_shade_outputs`]
 //! appends them to the stage's output in chunk order.
 
-use crate::accel::packet::{LANES, LaneMask};
+use crate::accel::packet::LaneMask;
 use crate::core::math::{Color, Ray};
 use crate::integrators::counters::RayCounts;
 use crate::integrators::wavefront::queues::{
@@ -25,6 +25,7 @@ use crate::integrators::wavefront::queues::{
 };
 use crate::scene::Hit;
 use crate::scene::material::MaterialClass;
+use crate::scene::query::COHERENT_LANES;
 use crate::transport::interaction::{RayKind, ShadowQuery};
 
 /// Where hits are routed: one hit queue per material class.
@@ -101,13 +102,14 @@ impl ShadeOutput {
     /// Traces the shadow rays of the group of hits shaded since the last
     /// call (each hit closed by [`ShadeOutput::end_hit`]) and keeps the
     /// radiance of the unblocked ones, in queue order, for the shadow
-    /// stage to add. The rays are traced in groups of up to [`LANES`]
-    /// taken across the hits: every hit's first ray, then every hit's
+    /// stage to add. The rays are traced in groups of up to `width` (at
+    /// most [`COHERENT_LANES`]) taken across the hits: every hit's first ray, then every hit's
     /// second ray, and so on, so that a group holds the rays of
     /// neighbouring hits towards one light (the first light that can
     /// light them, the second...), which point alike; `occluded` returns
     /// the mask of the blocked rays of a group.
-    pub fn trace_shadows(&mut self, occluded: impl Fn(&[Ray], &[f32]) -> LaneMask) {
+    pub fn trace_shadows(&mut self, width: usize, occluded: impl Fn(&[Ray], &[f32]) -> LaneMask) {
+        let width = width.clamp(1, COHERENT_LANES);
         let n = self.shadows.len();
         if n == 0 {
             self.hit_ends.clear();
@@ -131,10 +133,11 @@ impl ShadeOutput {
         self.visible.clear();
         self.visible.resize(n, false);
         let q = &self.shadows;
-        for group in self.order.chunks(LANES) {
+        for group in self.order.chunks(width) {
             let m = group.len();
-            let rays: [Ray; LANES] = std::array::from_fn(|l| q.ray(group[l.min(m - 1)] as usize));
-            let t_max: [f32; LANES] =
+            let rays: [Ray; COHERENT_LANES] =
+                std::array::from_fn(|l| q.ray(group[l.min(m - 1)] as usize));
+            let t_max: [f32; COHERENT_LANES] =
                 std::array::from_fn(|l| q.t_max[group[l.min(m - 1)] as usize]);
             let blocked = occluded(&rays[..m], &t_max[..m]);
             for (l, &j) in group.iter().enumerate() {
@@ -322,89 +325,93 @@ mod tests {
     }
 
     /// A chunk that traces its own shadow rays traces every ray of the
-    /// group exactly once, in groups of at most `LANES` that take the
+    /// group exactly once, in groups of at most the width asked for (8 or
+    /// 16) that take the
     /// hits' first rays, then their second rays, and so on, and passes on
     /// the radiance of the unblocked rays in queue order (hit by hit,
     /// each hit's rays in the order pushed), whatever order they were
     /// traced in: the order each path's radiance is summed in.
     #[test]
     fn shadow_rays_traced_by_slot_are_passed_on_in_queue_order() {
+        use crate::accel::packet::LANES;
         use std::cell::RefCell;
 
-        // Hit h pushes counts[h] rays; ray k of hit h is keyed 100 h + k
-        // (in its origin's x, its path and its radiance).
-        let counts = [2usize, 0, 3, 1, 12, 2, 1, 1, 1, 3];
-        let mut out = ShadeOutput::default();
-        for (h, &n) in counts.iter().enumerate() {
-            for k in 0..n {
-                let key = (100 * h + k) as u32;
-                let q = ShadowQuery {
-                    ray: Ray::new(Vec3A::new(key as f32, 0.0, 0.0), Vec3A::Y),
-                    t_max: 1.0,
-                    radiance: Color::splat(key as f32),
-                };
-                out.push_shadow_from(key, Color::ONE, q);
+        for width in [LANES, COHERENT_LANES] {
+            // Hit h pushes counts[h] rays; ray k of hit h is keyed 100 h + k
+            // (in its origin's x, its path and its radiance).
+            let counts = [2usize, 0, 3, 1, 12, 2, 1, 1, 1, 3];
+            let mut out = ShadeOutput::default();
+            for (h, &n) in counts.iter().enumerate() {
+                for k in 0..n {
+                    let key = (100 * h + k) as u32;
+                    let q = ShadowQuery {
+                        ray: Ray::new(Vec3A::new(key as f32, 0.0, 0.0), Vec3A::Y),
+                        t_max: 1.0,
+                        radiance: Color::splat(key as f32),
+                    };
+                    out.push_shadow_from(key, Color::ONE, q);
+                }
+                out.end_hit();
             }
-            out.end_hit();
-        }
-        let groups = RefCell::new(Vec::new());
-        // Rays with an odd key are blocked.
-        out.trace_shadows(|rays, t_max| {
-            assert_eq!(rays.len(), t_max.len());
-            let keys: Vec<u32> = rays.iter().map(|r| r.origin.x as u32).collect();
-            let blocked = keys
-                .iter()
-                .enumerate()
-                .filter(|(_, k)| *k % 2 == 1)
-                .fold(0, |m, (l, _)| m | 1 << l);
-            groups.borrow_mut().push(keys);
-            blocked
-        });
-        // By slot: every hit's first ray, then every hit's second ...
-        let by_slot: Vec<u32> = (0..12)
-            .flat_map(|k| {
-                counts
+            let groups = RefCell::new(Vec::new());
+            // Rays with an odd key are blocked.
+            out.trace_shadows(width, |rays, t_max| {
+                assert_eq!(rays.len(), t_max.len());
+                let keys: Vec<u32> = rays.iter().map(|r| r.origin.x as u32).collect();
+                let blocked = keys
                     .iter()
                     .enumerate()
-                    .filter(move |(_, n)| k < **n)
-                    .map(move |(h, _)| (100 * h + k) as u32)
-            })
-            .collect();
-        let groups = groups.into_inner();
-        assert!(groups.iter().all(|g| !g.is_empty() && g.len() <= LANES));
-        assert_eq!(groups.concat(), by_slot);
-        assert_eq!(
-            groups[0].len(),
-            LANES,
-            "the hits' first rays share a packet"
-        );
-        // Passed on: the even keys, in queue order.
-        let in_queue_order: Vec<u32> = counts
-            .iter()
-            .enumerate()
-            .flat_map(|(h, &n)| (0..n).map(move |k| (100 * h + k) as u32))
-            .filter(|k| k % 2 == 0)
-            .collect();
-        assert_eq!(out.lit.path, in_queue_order);
-        let radiance: Vec<u32> = out.lit.radiance.iter().map(|c| c.x as u32).collect();
-        assert_eq!(radiance, in_queue_order);
-        assert!(out.shadows.is_empty() && out.hit_ends.is_empty());
-        // Handed over whole at the join, after the emission.
-        let mut radiance = vec![Color::ZERO; 1300];
-        let mut shadows = ShadowSegments::default();
-        let mut next = RayQueue::default();
-        let mut rays = RayCounts::default();
-        join_shade_outputs(
-            std::slice::from_mut(&mut out),
-            ShadeTargets {
-                radiance: &mut radiance,
-                shadows: &mut shadows,
-                next: &mut next,
-                rays: &mut rays,
-            },
-        );
-        assert_eq!(shadows.len(), in_queue_order.len());
-        assert_eq!(rays.shadow, counts.iter().sum::<usize>() as u64);
+                    .filter(|(_, k)| *k % 2 == 1)
+                    .fold(0, |m, (l, _)| m | 1 << l);
+                groups.borrow_mut().push(keys);
+                blocked
+            });
+            // By slot: every hit's first ray, then every hit's second ...
+            let by_slot: Vec<u32> = (0..12)
+                .flat_map(|k| {
+                    counts
+                        .iter()
+                        .enumerate()
+                        .filter(move |(_, n)| k < **n)
+                        .map(move |(h, _)| (100 * h + k) as u32)
+                })
+                .collect();
+            let groups = groups.into_inner();
+            assert!(groups.iter().all(|g| !g.is_empty() && g.len() <= width));
+            assert_eq!(groups.concat(), by_slot);
+            assert_eq!(
+                groups[0].len(),
+                width,
+                "the hits' first rays share a packet"
+            );
+            // Passed on: the even keys, in queue order.
+            let in_queue_order: Vec<u32> = counts
+                .iter()
+                .enumerate()
+                .flat_map(|(h, &n)| (0..n).map(move |k| (100 * h + k) as u32))
+                .filter(|k| k % 2 == 0)
+                .collect();
+            assert_eq!(out.lit.path, in_queue_order);
+            let radiance: Vec<u32> = out.lit.radiance.iter().map(|c| c.x as u32).collect();
+            assert_eq!(radiance, in_queue_order);
+            assert!(out.shadows.is_empty() && out.hit_ends.is_empty());
+            // Handed over whole at the join, after the emission.
+            let mut radiance = vec![Color::ZERO; 1300];
+            let mut shadows = ShadowSegments::default();
+            let mut next = RayQueue::default();
+            let mut rays = RayCounts::default();
+            join_shade_outputs(
+                std::slice::from_mut(&mut out),
+                ShadeTargets {
+                    radiance: &mut radiance,
+                    shadows: &mut shadows,
+                    next: &mut next,
+                    rays: &mut rays,
+                },
+            );
+            assert_eq!(shadows.len(), in_queue_order.len());
+            assert_eq!(rays.shadow, counts.iter().sum::<usize>() as u64);
+        }
     }
 
     /// Every ray goes to exactly one queue: misses to the escaped queue,

@@ -492,7 +492,9 @@ fn trace_chunk_shadows(
     if through_media {
         out.trace_shadows_through(|r, t_max| volume::shadow_transmittance(scene, r, t_max));
     } else {
-        out.trace_shadows(|rays, t_max| occluded_group(scene, batch, rays, t_max));
+        out.trace_shadows(shadow_group_width(), |rays, t_max| {
+            occluded_group(scene, batch, rays, t_max)
+        });
     }
 }
 
@@ -560,7 +562,17 @@ fn occluded_group(
     t_max: &[f32],
 ) -> LaneMask {
     if let Some(b) = batch {
-        return b.occluded(scene, rays, t_max);
+        // (The batch takes up to eight rays at a time.)
+        let mut blocked = 0;
+        for (c, (r, t)) in rays.chunks(LANES).zip(t_max.chunks(LANES)).enumerate() {
+            blocked |= b.occluded(scene, r, t) << (c * LANES);
+        }
+        return blocked;
+    }
+    if rays.len() > LANES {
+        // Groups of 16 (the AVX-512 path, `shadow_group_width`): one
+        // packet of 16 where the rays share an octant.
+        return scene.occluded_coherent(rays, t_max);
     }
     if rays.len() > 1 && one_octant(rays) {
         return scene.occluded_packet_with(rays, t_max, false);
@@ -572,6 +584,17 @@ fn occluded_group(
         }
     }
     blocked
+}
+
+/// Shadow rays per group traced together by [`occluded_group`]: 16 on
+/// the AVX-512 path (one packet of 16, as the recursive integrator's
+/// camera packets trace theirs), 8 elsewhere.
+fn shadow_group_width() -> usize {
+    if crate::core::simd::use_avx512() {
+        COHERENT_LANES
+    } else {
+        LANES
+    }
 }
 
 /// The attenuation of hit `h`'s segment in a scene with media: by its
