@@ -13,7 +13,7 @@ pub use crate::accel::build::{BuildOptions, BuildQuality, MAX_COORDINATE};
 use crate::accel::bvh8::Bvh8;
 use crate::accel::grid::Grid;
 use crate::accel::kdtree::KdTree;
-use crate::accel::packet::{LANES, LaneMask, Packet, for_each_lane};
+use crate::accel::packet::{LANES, LaneMask, Packet, PacketOf, for_each_lane};
 use crate::accel::packet16::{LANES16, Packet16};
 use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
@@ -652,12 +652,7 @@ impl Mesh {
             );
             return;
         }
-        // (A loop rather than `std::array::from_fn`, whose closure is not
-        // inlined into the entry point.)
-        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES];
-        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
-            *w = WatertightRay::new(r);
-        }
+        let wt = watertight_lanes(packet);
         let lanes = lanes & packet.valid;
         if lanes == 0 {
             return;
@@ -744,12 +739,7 @@ impl Mesh {
         if lanes == 0 {
             return;
         }
-        // (A loop rather than `std::array::from_fn`, whose closure is not
-        // inlined into the entry point.)
-        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES16];
-        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
-            *w = WatertightRay::new(r);
-        }
+        let wt = watertight_lanes(packet);
         let lead = lanes.trailing_zeros() as usize;
         let mut shared = 0;
         for (l, w) in wt.iter().enumerate() {
@@ -829,6 +819,53 @@ impl Mesh {
         );
     }
 
+    /// The lanes of `packet` in `lanes` blocked within their intervals,
+    /// each traced alone (structures other than the BVH).
+    #[inline(always)]
+    fn occluded_lane_by_lane<const AVX: bool, const N: usize>(
+        &self,
+        packet: &PacketOf<N>,
+        lanes: LaneMask,
+    ) -> LaneMask {
+        let mut blocked = 0;
+        for_each_lane(
+            lanes,
+            #[inline(always)]
+            |l| {
+                if self.occluded_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l]) {
+                    blocked |= 1 << l;
+                }
+            },
+        );
+        blocked
+    }
+
+    /// The lanes in `lanes` that hit a triangle of leaf `leaf` within
+    /// their intervals in `p`, each tested with the single-ray leaf test.
+    #[inline(always)]
+    fn leaf_blocked_lanes<const AVX: bool, const N: usize>(
+        &self,
+        wt: &[WatertightRay; N],
+        p: &PacketOf<N>,
+        lanes: LaneMask,
+        leaf: u32,
+    ) -> LaneMask {
+        let mut blocked = 0;
+        for_each_lane(
+            lanes,
+            #[inline(always)]
+            |l| {
+                if self
+                    .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
+                    .is_some()
+                {
+                    blocked |= 1 << l;
+                }
+            },
+        );
+        blocked
+    }
+
     /// The lanes of `packet` in `lanes` that hit any triangle within their
     /// intervals; each lane stops at its first blocker.
     #[inline(always)]
@@ -838,28 +875,9 @@ impl Mesh {
         lanes: LaneMask,
     ) -> LaneMask {
         if !matches!(self.structure, Structure::Bvh) {
-            let mut blocked = 0;
-            for_each_lane(
-                lanes,
-                #[inline(always)]
-                |l| {
-                    if self.occluded_kernel::<AVX>(
-                        &packet.rays[l],
-                        packet.t_min[l],
-                        packet.t_max[l],
-                    ) {
-                        blocked |= 1 << l;
-                    }
-                },
-            );
-            return blocked;
+            return self.occluded_lane_by_lane::<AVX, _>(packet, lanes);
         }
-        // (A loop rather than `std::array::from_fn`, whose closure is not
-        // inlined into the entry point.)
-        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES];
-        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
-            *w = WatertightRay::new(r);
-        }
+        let wt = watertight_lanes(packet);
         let lanes = lanes & packet.valid;
         if lanes == 0 {
             return 0;
@@ -894,18 +912,7 @@ impl Mesh {
                 } else {
                     hit
                 };
-                for_each_lane(
-                    rest,
-                    #[inline(always)]
-                    |l| {
-                        if self
-                            .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
-                            .is_some()
-                        {
-                            now |= 1 << l;
-                        }
-                    },
-                );
+                now |= self.leaf_blocked_lanes::<AVX, _>(&wt, p, rest, leaf);
                 blocked |= now;
                 now
             },
@@ -926,31 +933,12 @@ impl Mesh {
     ) -> LaneMask {
         let lanes = lanes & packet.valid;
         if !matches!(self.structure, Structure::Bvh) {
-            let mut blocked = 0;
-            for_each_lane(
-                lanes,
-                #[inline(always)]
-                |l| {
-                    if self.occluded_kernel::<AVX>(
-                        &packet.rays[l],
-                        packet.t_min[l],
-                        packet.t_max[l],
-                    ) {
-                        blocked |= 1 << l;
-                    }
-                },
-            );
-            return blocked;
+            return self.occluded_lane_by_lane::<AVX, _>(packet, lanes);
         }
         if lanes == 0 {
             return 0;
         }
-        // (A loop rather than `std::array::from_fn`, whose closure is not
-        // inlined into the entry point.)
-        let mut wt = [WatertightRay::new(&packet.rays[0]); LANES16];
-        for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
-            *w = WatertightRay::new(r);
-        }
+        let wt = watertight_lanes(packet);
         let mut blocked = 0;
         crate::accel::packet16::traverse16::<AVX, AVX512>(
             &self.bvh,
@@ -958,19 +946,7 @@ impl Mesh {
             lanes,
             #[inline(always)]
             |p, hit, leaf| {
-                let mut now = 0;
-                for_each_lane(
-                    hit,
-                    #[inline(always)]
-                    |l| {
-                        if self
-                            .leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], p.t_max[l])
-                            .is_some()
-                        {
-                            now |= 1 << l;
-                        }
-                    },
-                );
+                let now = self.leaf_blocked_lanes::<AVX, _>(&wt, p, hit, leaf);
                 blocked |= now;
                 now
             },
@@ -1307,6 +1283,18 @@ fn vertex_normals(positions: &[Vec3A], indices: &[[u32; 3]]) -> Vec<Vec3A> {
 }
 
 static MESH_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// The watertight-test form of each lane's ray of `packet` (a loop rather
+/// than `std::array::from_fn`, whose closure was not inlined into the
+/// entry point).
+#[inline(always)]
+fn watertight_lanes<const N: usize>(packet: &PacketOf<N>) -> [WatertightRay; N] {
+    let mut wt = [WatertightRay::new(&packet.rays[0]); N];
+    for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
+        *w = WatertightRay::new(r);
+    }
+    wt
+}
 
 /// Number of mesh BVHs built by this process so far (one per successful
 /// [`Mesh::new`]). Scene updates never build one: tests compare this

@@ -8,7 +8,7 @@ use crate::accel::packet::{LANES, LaneMask, Packet, PacketOf, for_each_lane};
 use crate::accel::packet16::{LANES16, Packet16, PacketTraversal};
 use crate::accel::single::traverse_bvh;
 use crate::core::math::{Ray, one_octant};
-use crate::geometry::mesh::Mesh;
+use crate::geometry::mesh::{Mesh, MeshHit};
 use crate::scene::instance::{Hit, Instance, InstanceGeometry, LocalHit, to_object};
 use crate::scene::render_scene::RenderScene;
 
@@ -407,14 +407,11 @@ impl RenderScene {
         out: &mut [Option<Hit>],
         mesh_packets: bool,
     ) {
-        let n = rays.len().min(LANES);
-        let mut best: [Option<(f32, u32, LocalHit)>; LANES] = [None; LANES];
-        self.top_level_packet::<LANES, AVX, false>(
+        self.intersect_packet_of::<LANES, AVX, false>(
             rays,
-            &mut best,
+            out,
             #[inline(always)]
-            |p, lanes, index, inst, m, best| {
-                let mut hits = [None; LANES];
+            |p, lanes, inst, m, hits| {
                 if mesh_packets {
                     let mut local = Packet::new(&[], &[], &[]);
                     for_each_lane(
@@ -422,7 +419,7 @@ impl RenderScene {
                         #[inline(always)]
                         |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
                     );
-                    m.intersect_packet_kernel::<AVX>(&mut local, lanes, &mut hits);
+                    m.intersect_packet_kernel::<AVX>(&mut local, lanes, hits);
                 } else {
                     for_each_lane(
                         lanes,
@@ -436,21 +433,8 @@ impl RenderScene {
                         },
                     );
                 }
-                for_each_lane(
-                    lanes,
-                    #[inline(always)]
-                    |l| {
-                        if let Some(h) = hits[l] {
-                            p.t_max[l] = h.t;
-                            best[l] = Some((h.t, index, LocalHit::Mesh(h)));
-                        }
-                    },
-                );
             },
         );
-        for (l, o) in out[..n].iter_mut().enumerate() {
-            *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
-        }
     }
 
     /// [`Self::intersect_packet_kernel`] for packets of 16: the top level
@@ -462,21 +446,45 @@ impl RenderScene {
         rays: &[Ray],
         out: &mut [Option<Hit>],
     ) {
-        let n = rays.len().min(LANES16);
-        let mut best: [Option<(f32, u32, LocalHit)>; LANES16] = [None; LANES16];
-        self.top_level_packet::<LANES16, AVX, AVX512>(
+        self.intersect_packet_of::<LANES16, AVX, AVX512>(
             rays,
-            &mut best,
+            out,
             #[inline(always)]
-            |p, lanes, index, inst, m, best| {
+            |p, lanes, inst, m, hits| {
                 let mut local = Packet16::new(&[], &[], &[]);
                 for_each_lane(
                     lanes,
                     #[inline(always)]
                     |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
                 );
-                let mut hits = [None; LANES16];
-                m.intersect_packet16_kernel::<AVX, AVX512>(&mut local, lanes, &mut hits);
+                m.intersect_packet16_kernel::<AVX, AVX512>(&mut local, lanes, hits);
+            },
+        );
+    }
+
+    /// The closest-hit query of packets of `N` lanes (8 or 16, as
+    /// [`Self::top_level_packet`]): `mesh_hits(packet, lanes, instance,
+    /// mesh, hits)` finds the object-space hits of the lanes that reach a
+    /// mesh instance, which then shrink the lanes' intervals; the
+    /// nearest hits are finished into `out`.
+    #[inline(always)]
+    fn intersect_packet_of<const N: usize, const AVX: bool, const AVX512: bool>(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+        mut mesh_hits: impl FnMut(&PacketOf<N>, LaneMask, &Instance, &Mesh, &mut [Option<MeshHit>; N]),
+    ) where
+        PacketOf<N>: PacketTraversal,
+    {
+        let n = rays.len().min(N);
+        let mut best: [Option<(f32, u32, LocalHit)>; N] = [None; N];
+        self.top_level_packet::<N, AVX, AVX512>(
+            rays,
+            &mut best,
+            #[inline(always)]
+            |p, lanes, index, inst, m, best| {
+                let mut hits = [None; N];
+                mesh_hits(p, lanes, inst, m, &mut hits);
                 for_each_lane(
                     lanes,
                     #[inline(always)]
