@@ -522,7 +522,7 @@ fn shade_hits(
     input: ShadeInput<'_>,
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
-    kernel: impl Fn(&HitItem, &Interaction, &mut ShadeOutput) + Sync,
+    kernel: impl Fn(&HitItem, &mut Interaction, &mut ShadeOutput) + Sync,
 ) {
     let ShadeInput {
         rays, found, hits, ..
@@ -539,8 +539,8 @@ fn shade_hits(
                     debug_assert!(false, "ray {i} is queued for shading without a hit");
                     continue;
                 };
-                let (h, it) = prepare_hit(scene, settings, hit, &rays.get(i));
-                kernel(&h, &it, out);
+                let (h, mut it) = prepare_hit(scene, settings, hit, &rays.get(i));
+                kernel(&h, &mut it, out);
                 out.end_hit();
             }
             trace_chunk_shadows(scene, through_media, batch, out);
@@ -866,19 +866,15 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
         }
         let mut sampler = seeds[h.path as usize].sampler();
         let lambda = wavelengths.get(h.path as usize).copied();
-        let spectral;
+        // The interaction is adjusted in place (a copy of it costs a
+        // `memmove` per hit).
         let mut crossing = None;
-        let it = if SSS && scene.materials()[h.material as usize].subsurface {
-            (spectral, crossing) = at_wavelength_and_boundary(scene, h, it, lambda);
-            &spectral
+        if SSS && scene.materials()[h.material as usize].subsurface {
+            crossing = at_wavelength_and_boundary(scene, h, it, lambda);
         } else if lambda.is_some() {
-            let mut at = *it;
-            path::at_wavelength(&mut at, lambda);
-            spectral = at;
-            &spectral
-        } else {
-            it
-        };
+            path::at_wavelength(it, lambda);
+        }
+        let it = &*it;
         let lobes = LobeChoice::new(it);
         if NEE && crossing != Some(volume::Crossing::Into) {
             path::next_event(scene, settings, it, &lobes, &mut sampler, h.depth, |q| {
@@ -906,21 +902,20 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     });
 }
 
-/// The interaction `it` of hit `h` at the path's wavelength `lambda` and,
-/// on a subsurface surface, turned into its diffuse boundary
-/// ([`volume::diffuse_crossing`]). Out of line: most scenes need neither.
+/// Sets the interaction `it` of hit `h` to the path's wavelength `lambda`
+/// and, on a subsurface surface, turns it into its diffuse boundary
+/// ([`volume::diffuse_crossing`]), returning the crossing. Out of line:
+/// most scenes need neither.
 #[cold]
 #[inline(never)]
 fn at_wavelength_and_boundary(
     scene: &RenderScene,
     h: &HitItem,
-    it: &Interaction,
+    it: &mut Interaction,
     lambda: Option<f32>,
-) -> (Interaction, Option<volume::Crossing>) {
-    let mut at = *it;
-    path::at_wavelength(&mut at, lambda);
-    let crossing = volume::diffuse_crossing(scene, &h.hit(), &mut at);
-    (at, crossing)
+) -> Option<volume::Crossing> {
+    path::at_wavelength(it, lambda);
+    volume::diffuse_crossing(scene, &h.hit(), it)
 }
 
 /// Stage: shades the hits of `class` with the kernel for the lobes the
