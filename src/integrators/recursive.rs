@@ -287,6 +287,9 @@ fn trace_path_in<const MEDIA: bool>(
     let mut cone = cone;
     let mut prev_pdf = 0.0;
     let mut depth = 0;
+    // Surfaces' shadow rays cross media only where some can be seen
+    // through (`RenderScene::shadows_are_binary`).
+    let through_media = MEDIA && !scene.shadows_are_binary();
     loop {
         let found = scene.intersect(&ray, 0.0, f32::INFINITY);
         let (hit, distance) = if MEDIA {
@@ -350,7 +353,7 @@ fn trace_path_in<const MEDIA: bool>(
         if crossing != Some(volume::Crossing::Into) {
             path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
                 counters.rays.shadow += 1;
-                if MEDIA {
+                if through_media {
                     let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
                     radiance += throughput * q.radiance * tr;
                 } else if !scene.occluded(&q.ray, 0.0, q.t_max) {

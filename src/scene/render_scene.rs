@@ -67,6 +67,10 @@ pub struct RenderScene {
     /// material updates): with it, or with a fog, path transport runs the
     /// medium kernels (`transport::volume`).
     pub(super) scattering: bool,
+    /// True when every medium lies behind boundaries that block shadow
+    /// rays ([`media_behind_opaque_boundaries`]; kept up to date by the
+    /// material updates).
+    pub(super) opaque_media: bool,
     /// The medium that fills the space outside every object (a global
     /// fog), if any.
     pub(super) fog: Option<Medium>,
@@ -114,6 +118,7 @@ impl RenderScene {
             cutouts: has_cutouts(&materials),
             spectral: has_dispersion(&materials),
             scattering: has_scattering(&materials),
+            opaque_media: media_behind_opaque_boundaries(&materials),
             fog: None,
             instances,
             materials,
@@ -238,6 +243,23 @@ impl RenderScene {
         self.scattering || self.fog.is_some()
     }
 
+    /// True when the shadow rays of surfaces are either blocked or reach
+    /// their light unattenuated, so that path transport traces them as
+    /// occlusion queries (any hit, in coherent groups) instead of
+    /// following them through media
+    /// ([`shadow_transmittance`](crate::transport::volume::shadow_transmittance),
+    /// closest hits one by one), with the same result: no fog, no
+    /// index-matched interface, and every medium the interior of a
+    /// subsurface material. Lights are outside subsurface objects (the
+    /// model of `transport::volume`), so a shadow ray that starts in one
+    /// ends on its boundary, which blocks it, as every surface that is
+    /// not an interface does; one that starts outside crosses no medium
+    /// before its first surface.
+    #[inline]
+    pub fn shadows_are_binary(&self) -> bool {
+        self.fog.is_none() && self.opaque_media
+    }
+
     /// Sets or removes the environment.
     pub fn set_environment(&mut self, environment: Option<Environment>) {
         self.environment = environment;
@@ -276,6 +298,15 @@ pub(super) fn has_cutouts(materials: &[Material]) -> bool {
 /// True when the interior of any of `materials` scatters.
 pub(super) fn has_scattering(materials: &[Material]) -> bool {
     materials.iter().any(|m| m.has_scattering_interior())
+}
+
+/// True when no material of `materials` is an index-matched interface
+/// ([`Material::is_interface`]) and every interior is a subsurface
+/// material's (see [`RenderScene::shadows_are_binary`]).
+pub(super) fn media_behind_opaque_boundaries(materials: &[Material]) -> bool {
+    materials
+        .iter()
+        .all(|m| !m.is_interface() && (m.subsurface || m.interior().is_none()))
 }
 
 /// True when any of `materials` is dispersive.

@@ -8,7 +8,8 @@ use crate::scene::instance::{Instance, InstanceGeometry};
 use crate::scene::light::Light;
 use crate::scene::material::Material;
 use crate::scene::render_scene::{
-    RenderScene, constant_surface, has_cutouts, has_dispersion, has_scattering, resolve_lights,
+    RenderScene, constant_surface, has_cutouts, has_dispersion, has_scattering,
+    media_behind_opaque_boundaries, resolve_lights,
 };
 use glam::DVec3;
 
@@ -78,6 +79,7 @@ impl RenderScene {
         self.cutouts |= material.alpha.is_some();
         self.spectral |= material.dispersion.is_some();
         self.scattering |= material.has_scattering_interior();
+        self.opaque_media &= media_behind_opaque_boundaries(std::slice::from_ref(&material));
         self.surfaces.push(constant_surface(&material));
         self.materials.push(material);
         self.materials.len() as u32 - 1
@@ -91,6 +93,7 @@ impl RenderScene {
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
         self.scattering = has_scattering(&self.materials);
+        self.opaque_media = media_behind_opaque_boundaries(&self.materials);
     }
 
     /// Removes material `index` by moving the last material into its
@@ -116,6 +119,7 @@ impl RenderScene {
         self.cutouts = has_cutouts(&self.materials);
         self.spectral = has_dispersion(&self.materials);
         self.scattering = has_scattering(&self.materials);
+        self.opaque_media = media_behind_opaque_boundaries(&self.materials);
         removed
     }
 
@@ -255,6 +259,52 @@ mod tests {
         check(&scene, a, &checker);
         scene.swap_remove_material(a);
         check(&scene, 0, &plain(0.7));
+    }
+
+    /// [`RenderScene::shadows_are_binary`] follows the materials and the
+    /// fog: true for subsurface interiors alone, false once a shadow ray
+    /// could be seen through a medium (an absorbing glass, an
+    /// index-matched interface, a fog), and true again when that is gone.
+    #[test]
+    fn binary_shadows_follow_material_updates_and_fog() {
+        use crate::core::medium::Medium;
+        let diffuse = Material::default();
+        let subsurface = Material {
+            subsurface: true,
+            absorption: Color::splat(0.1),
+            scattering: Color::splat(2.0),
+            ..Default::default()
+        };
+        let glass = |absorption: f32, ior: f32| Material {
+            base_color: Color::ONE,
+            diffuse: 0.0,
+            transmission: 1.0,
+            ior,
+            absorption: Color::splat(absorption),
+            ..Default::default()
+        };
+        assert!(glass(0.0, 1.0).is_interface());
+        let mut scene = empty();
+        assert!(scene.shadows_are_binary(), "empty scene");
+        scene.push_material(diffuse.clone());
+        let s = scene.push_material(subsurface.clone());
+        assert!(scene.shadows_are_binary(), "subsurface interior");
+        let g = scene.push_material(glass(0.5, 1.5));
+        assert!(!scene.shadows_are_binary(), "absorbing glass pushed");
+        scene.set_material(g, glass(0.0, 1.5));
+        assert!(scene.shadows_are_binary(), "clear glass");
+        scene.set_material(s, glass(0.0, 1.0));
+        assert!(!scene.shadows_are_binary(), "interface");
+        scene.swap_remove_material(s);
+        assert!(scene.shadows_are_binary(), "interface removed");
+        scene.set_fog(Some(Medium {
+            sigma_a: Color::splat(0.1),
+            sigma_s: Color::splat(0.1),
+            g: 0.0,
+        }));
+        assert!(!scene.shadows_are_binary(), "fog");
+        scene.set_fog(None);
+        assert!(scene.shadows_are_binary(), "fog removed");
     }
 
     #[test]

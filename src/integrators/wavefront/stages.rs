@@ -527,7 +527,8 @@ fn shade_hits(
     let ShadeInput {
         rays, found, hits, ..
     } = input;
-    let through_media = scene.has_media() && settings.transport == Transport::Path;
+    let through_media =
+        scene.has_media() && settings.transport == Transport::Path && !scene.shadows_are_binary();
     let batch = PolygonBatch::new(scene);
     let batch = batch.as_ref();
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
