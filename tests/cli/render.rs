@@ -290,6 +290,46 @@ fn bench_compares_both_integrators_as_json() {
     }
 }
 
+/// A scene that cannot be measured does not stop the others: it is named
+/// on stderr and skipped, the rest are measured (here in the JSON), and
+/// the command fails at the end.
+#[test]
+fn bench_skips_a_scene_it_cannot_measure_and_fails_at_the_end() {
+    let out = prism()
+        .args([
+            "bench",
+            "--runs",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--json",
+            "--transport",
+            "path",
+        ])
+        .arg(assets().join("illustration.toml"))
+        .arg(assets().join("whitted.toml"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("illustration.toml") && err.contains("(skipped)"),
+        "{err}"
+    );
+    assert!(err.contains("1 of 2 measurements failed"), "{err}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let scenes = json.as_array().unwrap();
+    assert_eq!(scenes.len(), 1);
+    assert!(
+        scenes[0]["scene"]
+            .as_str()
+            .unwrap()
+            .ends_with("whitted.toml")
+    );
+}
+
 /// `--accel` and `[settings] accel`: every structure renders the same
 /// image bit for bit (a small mesh scene); the scene file's choice is
 /// used and reported, the command line overrides it, and a bad name is a

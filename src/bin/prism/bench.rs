@@ -190,21 +190,37 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     let batch_paths = args.batch_paths.get()?;
     let (pool, threads) = args.threads.pool()?;
+    // A scene that cannot be measured (unreadable, or refusing the
+    // transport asked for) is reported and skipped; the others are still
+    // measured, and the command fails at the end.
     let mut results = Vec::new();
+    let mut failed = 0;
     for scene in &args.scenes {
         for &accel in &args.accel {
-            let r =
-                pool.install(|| bench_scene(scene, &args, accel.into(), batch_paths, threads))?;
-            if !args.json {
-                print_table(&r);
+            match pool.install(|| bench_scene(scene, &args, accel.into(), batch_paths, threads)) {
+                Ok(r) => {
+                    if !args.json {
+                        print_table(&r);
+                    }
+                    results.push(r);
+                }
+                Err(e) => {
+                    eprintln!("error: {e} (skipped)");
+                    failed += 1;
+                }
             }
-            results.push(r);
         }
     }
     if args.json {
         let text = serde_json::to_string_pretty(&results)
             .map_err(|e| Error::Invalid(format!("cannot write JSON: {e}")))?;
         println!("{text}");
+    }
+    if failed > 0 {
+        return Err(Error::Invalid(format!(
+            "{failed} of {} measurements failed (see above)",
+            failed + results.len()
+        )));
     }
     Ok(())
 }
