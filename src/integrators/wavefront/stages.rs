@@ -480,6 +480,15 @@ fn prepare_hit(
     (h, it)
 }
 
+/// True when surfaces' shadow rays are followed through media with their
+/// transmittance: path transport in a scene with media, unless those
+/// media cannot attenuate a shadow ray
+/// ([`RenderScene::shadows_are_binary`]).
+#[inline]
+fn shadows_through_media(scene: &RenderScene, settings: &RenderSettings) -> bool {
+    scene.has_media() && settings.transport == Transport::Path && !scene.shadows_are_binary()
+}
+
 /// Traces the shadow rays a shading chunk pushed since the last call
 /// (see [`shade_hits`]).
 #[inline(always)]
@@ -527,8 +536,7 @@ fn shade_hits(
     let ShadeInput {
         rays, found, hits, ..
     } = input;
-    let through_media =
-        scene.has_media() && settings.transport == Transport::Path && !scene.shadows_are_binary();
+    let through_media = shadows_through_media(scene, settings);
     let batch = PolygonBatch::new(scene);
     let batch = batch.as_ref();
     let outputs = drain_queue(hits.len(), scratch, |range, out| {
@@ -719,7 +727,7 @@ fn shade_lit_in_lanes<const SCATTER: bool>(
     let ShadeInput {
         rays, found, hits, ..
     } = input;
-    let through_media = scene.has_media() && settings.transport == Transport::Path;
+    let through_media = shadows_through_media(scene, settings);
     let batch = PolygonBatch::new(scene);
     let batch = batch.as_ref();
     let lights = scene.lights();
