@@ -743,7 +743,9 @@ impl RenderScene {
                             );
                             now
                         }
-                        InstanceGeometry::Mesh(m) if !mesh_packets => {
+                        // A mesh of one leaf goes lane by lane, as for
+                        // closest hits.
+                        InstanceGeometry::Mesh(m) if !mesh_packets || m.single_leaf() => {
                             let mut now = 0;
                             for_each_lane(
                                 lanes,
