@@ -1324,16 +1324,11 @@ fn vertex_normals(positions: &[Vec3A], indices: &[[u32; 3]]) -> Vec<Vec3A> {
 
 static MESH_BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-/// The watertight-test form of each lane's ray of `packet` (a loop rather
-/// than `std::array::from_fn`, whose closure was not inlined into the
-/// entry point).
+/// The watertight-test form of each lane's ray of `packet`
+/// ([`WatertightRay::lanes`]).
 #[inline(always)]
 fn watertight_lanes<const N: usize>(packet: &PacketOf<N>) -> [WatertightRay; N] {
-    let mut wt = [WatertightRay::new(&packet.rays[0]); N];
-    for (w, r) in wt.iter_mut().zip(&packet.rays).skip(1) {
-        *w = WatertightRay::new(r);
-    }
-    wt
+    WatertightRay::lanes(&packet.rays)
 }
 
 /// Number of mesh BVHs built by this process so far (one per successful
