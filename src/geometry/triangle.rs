@@ -13,7 +13,9 @@ use crate::core::math::Ray;
 pub struct WatertightRay {
     origin: Vec3A,
     direction: Vec3A,
-    k: [usize; 3],
+    /// `[kx, ky, kz]`, kept as bytes (the struct is copied per lane of
+    /// every packet).
+    k: [u8; 3],
     shear: Vec3A,
     /// The origin's coordinates in the order `k` (read by the leaf tests
     /// without indexing a vector by a run-time axis).
@@ -24,7 +26,7 @@ impl WatertightRay {
     /// The axis permutation `[kx, ky, kz]` (for tests).
     #[cfg(test)]
     pub(crate) fn permutation(&self) -> [usize; 3] {
-        self.k
+        self.k.map(usize::from)
     }
 
     /// Prepares `ray` (direction must be non-zero).
@@ -48,7 +50,7 @@ impl WatertightRay {
         Self {
             origin: ray.origin,
             direction: d,
-            k: [kx, ky, kz],
+            k: [kx as u8, ky as u8, kz as u8],
             shear: Vec3A::new(dk[kx] / dk[kz], dk[ky] / dk[kz], 0.0),
             o_k: [o[kx], o[ky], o[kz]],
         }
@@ -122,7 +124,7 @@ impl WatertightRay {
             *w = Self {
                 origin: rays[l].origin,
                 direction: rays[l].direction,
-                k: [kx, ky, kz],
+                k: [kx as u8, ky as u8, kz as u8],
                 shear: Vec3A::new(sx[l], sy[l], 0.0),
                 o_k: [o[kx][l], o[ky][l], o[kz][l]],
             };
@@ -158,7 +160,7 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
+        let [kx, ky, kz] = self.k.map(usize::from);
         let a = p0 - self.origin;
         let b = p1 - self.origin;
         let c = p2 - self.origin;
@@ -267,7 +269,7 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
+        let [kx, ky, kz] = self.k.map(usize::from);
         let o = self.origin.as_dvec3();
         let d = self.direction.as_dvec3();
         let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
@@ -458,7 +460,7 @@ impl WatertightRay {
     /// passed (all four lanes; the caller masks the unused ones).
     #[inline(always)]
     fn edges4(&self, block: &Tri4) -> (u32, [[f32; 4]; 3], [[f32; 4]; 3]) {
-        let [kx, ky, kz] = self.k;
+        let [kx, ky, kz] = self.k.map(usize::from);
         let sx = Vec4::splat(self.shear.x);
         let sy = Vec4::splat(self.shear.y);
         let (ox, oy, oz) = (
@@ -502,7 +504,7 @@ impl WatertightRay {
         // SAFETY: the caller runs on a CPU with AVX2 and FMA.
         unsafe {
             use std::arch::x86_64::*;
-            let [kx, ky, kz] = self.k;
+            let [kx, ky, kz] = self.k.map(usize::from);
             let row = {
                 #[inline(always)]
                 |vi: usize, a: usize| -> __m256 {
@@ -656,7 +658,7 @@ impl WatertightRay {
             };
             return f;
         }
-        let [kx, ky, kz] = self.k;
+        let [kx, ky, kz] = self.k.map(usize::from);
         let o = [
             Vec4::splat(self.origin[kx]),
             Vec4::splat(self.origin[ky]),
@@ -698,7 +700,7 @@ impl WatertightRay {
         // SAFETY: the caller runs on a CPU with AVX2 and FMA.
         unsafe {
             use std::arch::x86_64::*;
-            let k = self.k;
+            let k = self.k.map(usize::from);
             let sign = _mm256_set1_ps(-0.0);
             // (Plain loops: a closure passed to `std::array::from_fn` is not
             // inlined here and would call every intrinsic as a function.)
