@@ -662,7 +662,7 @@ impl Mesh {
         // rays) test a leaf from one frame of it.
         let (shared, lead) = Self::frame_lanes(&wt, lanes);
         if self.single_leaf() && shared.count_ones() < FRAME_LANES {
-            self.single_leaf_lanes::<AVX, LANES>(&wt, packet, lanes, best);
+            self.leaf_lanes::<AVX, LANES>(&wt, packet, lanes, 0, best);
             return;
         }
         crate::accel::packet::traverse::<AVX, true>(
@@ -692,19 +692,7 @@ impl Mesh {
                 } else {
                     hit
                 };
-                for_each_lane(
-                    hit,
-                    #[inline(always)]
-                    |l| {
-                        let reach = Self::reach(p.t_max[l], &best[l]);
-                        if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
-                            && self.wins(h.t, h.triangle, &best[l])
-                        {
-                            p.t_max[l] = h.t;
-                            best[l] = Some(h);
-                        }
-                    },
-                );
+                self.leaf_lanes::<AVX, _>(&wt, p, hit, leaf, best);
                 0
             },
         );
@@ -752,7 +740,7 @@ impl Mesh {
         }
         let shared = shared & lanes;
         if self.single_leaf() && shared.count_ones() < FRAME_LANES {
-            self.single_leaf_lanes::<AVX, LANES16>(&wt, packet, lanes, best);
+            self.leaf_lanes::<AVX, LANES16>(&wt, packet, lanes, 0, best);
             return;
         }
         let shears = Shears16::new(&wt);
@@ -810,38 +798,28 @@ impl Mesh {
                 } else {
                     hit
                 };
-                for_each_lane(
-                    hit,
-                    #[inline(always)]
-                    |l| {
-                        let reach = Self::reach(p.t_max[l], &best[l]);
-                        if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, p.t_min[l], reach)
-                            && self.wins(h.t, h.triangle, &best[l])
-                        {
-                            p.t_max[l] = h.t;
-                            best[l] = Some(h);
-                        }
-                    },
-                );
+                self.leaf_lanes::<AVX, _>(&wt, p, hit, leaf, best);
                 0
             },
         );
     }
 
-    /// The closest hits of a mesh whose BVH is one leaf for the lanes of
-    /// `packet` in `lanes` that share no frame (bounce rays): each lane
-    /// tests the leaf alone, without the packet traversal's set-up (its
-    /// rays prepared for node tests, the root's test), as
-    /// [`Mesh::intersect`] does: the leaf's box is padded, so its test
-    /// could not reject a hit. On `assets/prism.toml` (an eight-triangle
-    /// prism) the wavefront's later bounces went from 1.0x to 0.8x the
-    /// time.
+    /// Leaf `leaf` tested by each lane of `packet` in `lanes` alone (the
+    /// single-ray leaf test): a lane's hit replaces `best[l]` and shrinks
+    /// its `t_max` when it wins. The packet kernels use it for lanes that
+    /// share no leaf frame, and for a mesh whose BVH is one leaf (leaf 0)
+    /// when no lanes do: those skip the packet traversal's set-up (the
+    /// lanes' node rays, the root's test) as [`Mesh::intersect`] does,
+    /// since the leaf's padded box could not reject a hit. On
+    /// `assets/prism.toml` (an eight-triangle prism) that took the
+    /// wavefront's time to 0.8x.
     #[inline(always)]
-    fn single_leaf_lanes<const AVX: bool, const N: usize>(
+    fn leaf_lanes<const AVX: bool, const N: usize>(
         &self,
         wt: &[WatertightRay; N],
         packet: &mut PacketOf<N>,
         lanes: LaneMask,
+        leaf: u32,
         best: &mut [Option<MeshHit>; N],
     ) {
         for_each_lane(
@@ -849,7 +827,7 @@ impl Mesh {
             #[inline(always)]
             |l| {
                 let reach = Self::reach(packet.t_max[l], &best[l]);
-                if let Some(h) = self.leaf_hit::<AVX>(&wt[l], 0, packet.t_min[l], reach)
+                if let Some(h) = self.leaf_hit::<AVX>(&wt[l], leaf, packet.t_min[l], reach)
                     && self.wins(h.t, h.triangle, &best[l])
                 {
                     packet.t_max[l] = h.t;

@@ -133,6 +133,38 @@ pub(crate) fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
     )
 }
 
+/// What single rays answer for one packet's `rays`: each ray's closest
+/// hit (its `Debug` text, so every bit counts), the ends of segments
+/// along the rays, each at a random fraction (0.3 to 1.7) of the ray's
+/// first hit or of `miss` for a ray that hits nothing (so about as many
+/// are blocked as are not), and the mask of the segments blocked.
+fn single_ray_answers(
+    scene: &RenderScene,
+    rays: &[Ray],
+    rng: &mut Rng,
+    miss: f32,
+) -> (Vec<String>, Vec<f32>, u32) {
+    let hits: Vec<_> = rays
+        .iter()
+        .map(|r| scene.intersect(r, 0.0, f32::INFINITY))
+        .collect();
+    let ends: Vec<f32> = hits
+        .iter()
+        .map(|h| {
+            let f = 0.3 + 1.4 * rng.f32();
+            h.map_or(miss * f, |h| h.t * f)
+        })
+        .collect();
+    let blocked = (0..rays.len())
+        .filter(|&l| scene.occluded(&rays[l], 0.0, ends[l]))
+        .fold(0, |m, l| m | 1 << l);
+    (
+        hits.iter().map(|h| format!("{h:?}")).collect(),
+        ends,
+        blocked,
+    )
+}
+
 fn check_rays(scene: &RenderScene, rays: &[Ray]) -> usize {
     let mut hits = 0;
     for (i, ray) in rays.iter().enumerate() {
@@ -396,39 +428,15 @@ fn packets_of_16_equal_single_rays_on_every_path() {
         packets.push((&scene, rays));
     }
     let bits = |h: &Option<prism::scene::Hit>| format!("{h:?}");
-    let want: Vec<Vec<String>> = packets
-        .iter()
-        .map(|(s, rays)| {
-            rays.iter()
-                .map(|r| bits(&s.intersect(r, 0.0, f32::INFINITY)))
-                .collect()
-        })
-        .collect();
     // Occlusion of segments along the same rays (the shadow rays of
-    // `RenderScene::occluded_coherent`): each ends at a random fraction
-    // (0.3 to 1.7) of the ray's first hit, or at a random length for a
-    // ray that hits nothing, so about as many are blocked as are not.
-    let segments: Vec<Vec<f32>> = packets
+    // `RenderScene::occluded_coherent`), about as many blocked as not.
+    let (want, (segments, want_blocked)): (Vec<_>, (Vec<_>, Vec<_>)) = packets
         .iter()
         .map(|(s, rays)| {
-            rays.iter()
-                .map(|r| {
-                    let f = 0.3 + 1.4 * rng.f32();
-                    s.intersect(r, 0.0, f32::INFINITY)
-                        .map_or(30.0 * f, |h| h.t * f)
-                })
-                .collect()
+            let (hits, ends, blocked) = single_ray_answers(s, rays, &mut rng, 30.0);
+            (hits, (ends, blocked))
         })
-        .collect();
-    let want_blocked: Vec<u32> = packets
-        .iter()
-        .zip(&segments)
-        .map(|((s, rays), t)| {
-            (0..rays.len())
-                .filter(|&l| s.occluded(&rays[l], 0.0, t[l]))
-                .fold(0, |m, l| m | 1 << l)
-        })
-        .collect();
+        .unzip();
     let blocked_lanes: u32 = want_blocked.iter().map(|m| m.count_ones()).sum();
     let lanes: usize = packets.iter().map(|(_, r)| r.len()).sum();
     assert!(
@@ -540,36 +548,13 @@ fn packets_through_one_leaf_meshes_equal_single_rays() {
         })
         .collect();
     let bits = |h: &Option<prism::scene::Hit>| format!("{h:?}");
-    let want: Vec<Vec<String>> = packets
+    let (want, (segments, want_blocked)): (Vec<_>, (Vec<_>, Vec<_>)) = packets
         .iter()
         .map(|rays| {
-            rays.iter()
-                .map(|r| bits(&scene.intersect(r, 0.0, f32::INFINITY)))
-                .collect()
+            let (hits, ends, blocked) = single_ray_answers(&scene, rays, &mut rng, 20.0);
+            (hits, (ends, blocked))
         })
-        .collect();
-    let segments: Vec<Vec<f32>> = packets
-        .iter()
-        .map(|rays| {
-            rays.iter()
-                .map(|r| {
-                    let f = 0.3 + 1.4 * rng.f32();
-                    scene
-                        .intersect(r, 0.0, f32::INFINITY)
-                        .map_or(20.0 * f, |h| h.t * f)
-                })
-                .collect()
-        })
-        .collect();
-    let want_blocked: Vec<u32> = packets
-        .iter()
-        .zip(&segments)
-        .map(|(rays, t)| {
-            (0..rays.len())
-                .filter(|&l| scene.occluded(&rays[l], 0.0, t[l]))
-                .fold(0, |m, l| m | 1 << l)
-        })
-        .collect();
+        .unzip();
     let mut hits = 0;
     for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512] {
         if !simd::force(isa) {
