@@ -6,7 +6,7 @@
 //! layout is Prism's so that one node test reads six rows of eight floats
 //! (no dequantisation, no per-node margin) and leaves can hold their
 //! primitives side by side for one SIMD test (see
-//! [`crate::geometry::triangle::Tri4`]).
+//! [`crate::geometry::triangle::Tri8`]).
 
 use std::sync::atomic::{AtomicU32, Ordering};
 

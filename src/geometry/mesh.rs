@@ -19,7 +19,7 @@ use crate::accel::single::traverse_with;
 use crate::accel::stream::Stream;
 use crate::core::math::Ray;
 
-/// Most triangles in a mesh BVH leaf: two blocks of four, tested in one
+/// Most triangles in a mesh BVH leaf: one block of eight, tested in one
 /// 8-wide pass on the AVX2 path ([`WatertightRay::intersect8`]). Leaves
 /// of eight rather than four halve the nodes (anchors 100k: 11,400 ->
 /// 5,800, which then fit a 2 MB L2) and take about one node visit off
@@ -28,7 +28,7 @@ pub const LEAF_TRIANGLES: u32 = 8;
 
 /// Re-exported: the structure a mesh is built with.
 pub use crate::core::settings::Accel;
-use crate::geometry::triangle::{LeafFrame, Shears16, Tri4};
+use crate::geometry::triangle::{LeafFrame, Shears16, Tri8};
 
 /// A packet's leaf visit by at least this many lanes that share an origin
 /// and permutation computes the leaf's [`LeafFrame`] once for them.
@@ -101,7 +101,7 @@ pub struct Mesh {
     bvh: Bvh8,
     /// The triangles of each BVH leaf side by side (leaf `i` holds
     /// triangles `bvh.leaves[i].first ..` in BVH order).
-    blocks: Vec<Tri4>,
+    blocks: Vec<Tri8>,
     bounds: (Vec3A, Vec3A),
     structure: Structure,
     /// Seconds spent building the acceleration structure.
@@ -256,24 +256,14 @@ impl Mesh {
             .par_iter()
             .map(|t| t.map(|i| positions[i as usize]))
             .collect();
-        // Two blocks per leaf, side by side: triangles 0-3, then 4-7 (an
-        // empty block, never read, for leaves of four or fewer).
+        // One block per leaf: its triangles side by side.
         // (An indexed collect: one allocation, filled by the workers.)
-        let blocks: Vec<Tri4> = (0..bvh.leaves.len() * 2)
-            .into_par_iter()
-            .map(|k| {
-                let l = bvh.leaves[k / 2];
+        let blocks: Vec<Tri8> = bvh
+            .leaves
+            .par_iter()
+            .map(|l| {
                 let (first, count) = (l.first as usize, l.count as usize);
-                if k % 2 == 1 && count > 4 {
-                    Tri4::new(&corners[first + 4..first + count], l.first + 4)
-                } else {
-                    let lo = Tri4::new(&corners[first..first + count.min(4)], l.first);
-                    if k % 2 == 0 {
-                        lo
-                    } else {
-                        Tri4 { count: 0, ..lo }
-                    }
-                }
+                Tri8::new(&corners[first..first + count], l.first)
             })
             .collect();
         phases.lap("triangles, corners, blocks");
@@ -354,15 +344,14 @@ impl Mesh {
         t_min: f32,
         t_max: f32,
     ) -> Option<MeshHit> {
-        // The count from the small leaf array (`lo.count + hi.count`, which
-        // sit at the blocks' ends): known before the blocks arrive.
+        // The count from the small leaf array (`block.count`, which sits
+        // at the block's end): known before the block arrives.
         let count = self.bvh.leaves[leaf as usize].count;
-        let lo = &self.blocks[2 * leaf as usize];
-        let hi = &self.blocks[2 * leaf as usize + 1];
-        let (lane, t, b1, b2) = wt.intersect8::<AVX>([lo, hi], count, t_min, t_max)?;
+        let block = &self.blocks[leaf as usize];
+        let (lane, t, b1, b2) = wt.intersect8::<AVX>(block, count, t_min, t_max)?;
         Some(MeshHit {
             t,
-            triangle: lo.first + lane,
+            triangle: block.first + lane,
             b1,
             b2,
         })
@@ -379,13 +368,12 @@ impl Mesh {
         t_min: f32,
         t_max: f32,
     ) -> Option<MeshHit> {
-        let lo = &self.blocks[2 * leaf as usize];
-        let hi = &self.blocks[2 * leaf as usize + 1];
+        let block = &self.blocks[leaf as usize];
         let (lane, t, b1, b2) =
-            wt.intersect8_framed::<AVX>(frame, [lo, hi], lo.count + hi.count, t_min, t_max)?;
+            wt.intersect8_framed::<AVX>(frame, block, block.count, t_min, t_max)?;
         Some(MeshHit {
             t,
-            triangle: lo.first + lane,
+            triangle: block.first + lane,
             b1,
             b2,
         })
@@ -395,9 +383,8 @@ impl Mesh {
     /// permutation.
     #[inline(always)]
     fn leaf_frame<const AVX: bool>(&self, wt: &WatertightRay, leaf: u32) -> LeafFrame {
-        let lo = &self.blocks[2 * leaf as usize];
-        let hi = &self.blocks[2 * leaf as usize + 1];
-        wt.frame8::<AVX>([lo, hi], lo.count + hi.count)
+        let block = &self.blocks[leaf as usize];
+        wt.frame8::<AVX>(block, block.count)
     }
 
     /// The lanes of `lanes` whose rays share a [`LeafFrame`] with the
@@ -443,8 +430,8 @@ impl Mesh {
     #[inline(always)]
     fn prefetch_leaf(&self, leaf: u32) {
         crate::accel::single::prefetch_bytes(
-            &self.blocks[2 * leaf as usize],
-            2 * std::mem::size_of::<Tri4>(),
+            &self.blocks[leaf as usize],
+            std::mem::size_of::<Tri8>(),
         );
     }
 
@@ -489,7 +476,7 @@ impl Mesh {
                 self.bvh.nodes.len() * size_of::<crate::accel::bvh8::Node8>()
                     + self.bvh.leaves.len() * size_of::<crate::accel::bvh8::Leaf>()
                     + self.bvh.prims.len() * 4
-                    + self.blocks.len() * size_of::<Tri4>()
+                    + self.blocks.len() * size_of::<Tri8>()
             }
             Structure::Grid(g) => g.bytes(),
             Structure::KdTree(k) => k.bytes(),
@@ -752,10 +739,9 @@ impl Mesh {
             |p, hit, leaf| {
                 let framed = hit & shared;
                 let hit = if framed.count_ones() >= FRAME_LANES {
-                    let lo = &self.blocks[2 * leaf as usize];
-                    let hi = &self.blocks[2 * leaf as usize + 1];
-                    let count = lo.count + hi.count;
-                    let frame = wt[lead].frame8::<AVX>([lo, hi], count);
+                    let block = &self.blocks[leaf as usize];
+                    let count = block.count;
+                    let frame = wt[lead].frame8::<AVX>(block, count);
                     // Each lane searches up to its reach (one ulp past a
                     // known hit, so an equal `t` can win on index), then
                     // its leaf hit must win against what it had.
@@ -767,15 +753,7 @@ impl Mesh {
                     );
                     let mut out = [(0, 0.0, 0.0, 0.0); LANES16];
                     let found = WatertightRay::intersect8_lanes16::<AVX512>(
-                        &wt,
-                        &shears,
-                        &frame,
-                        [lo, hi],
-                        count,
-                        framed,
-                        &p.t_min,
-                        &mut reach,
-                        &mut out,
+                        &wt, &shears, &frame, block, count, framed, &p.t_min, &mut reach, &mut out,
                     );
                     for_each_lane(
                         found,
@@ -784,7 +762,7 @@ impl Mesh {
                             let (lane, t, b1, b2) = out[l];
                             let h = MeshHit {
                                 t,
-                                triangle: lo.first + lane,
+                                triangle: block.first + lane,
                                 b1,
                                 b2,
                             };

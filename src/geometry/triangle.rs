@@ -316,29 +316,31 @@ impl WatertightRay {
     }
 }
 
-/// Up to four triangles side by side, for one SIMD test
-/// ([`WatertightRay::intersect4`], or two blocks in
-/// [`WatertightRay::intersect8`]): `v[vertex][axis][lane]`. Unused lanes
-/// repeat lane 0 and are masked by [`Tri4::count`]. The block also
-/// names its triangles, so a leaf test reads nothing else.
+/// Up to eight triangles side by side, for one SIMD test
+/// ([`WatertightRay::intersect8`], one 8-wide pass on the AVX2 path, or
+/// two 4-wide ones; a leaf of four or fewer in one 4-wide pass,
+/// [`WatertightRay::intersect4`]): `v[vertex][axis][lane]`, each row
+/// one aligned AVX load. Unused lanes repeat lane 0 and are masked by
+/// [`Tri8::count`]. The block also names its triangles, so a leaf test
+/// reads nothing else.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-pub struct Tri4 {
+pub struct Tri8 {
     /// Vertex coordinates.
-    pub v: [[[f32; 4]; 3]; 3],
+    pub v: [[[f32; 8]; 3]; 3],
     /// Index of lane 0's triangle; lane `l` holds triangle `first + l`.
     pub first: u32,
-    /// Triangles in the block (1 to 4).
+    /// Triangles in the block (1 to 8).
     pub count: u32,
 }
 
-impl Tri4 {
-    /// Packs one to four triangles, the first of which is triangle
+impl Tri8 {
+    /// Packs one to eight triangles, the first of which is triangle
     /// `first`.
     pub fn new(tris: &[[Vec3A; 3]], first: u32) -> Self {
-        debug_assert!(!tris.is_empty() && tris.len() <= 4);
-        let mut v = [[[0.0; 4]; 3]; 3];
-        for l in 0..4 {
+        debug_assert!(!tris.is_empty() && tris.len() <= 8);
+        let mut v = [[[0.0; 8]; 3]; 3];
+        for l in 0..8 {
             let t = tris[if l < tris.len() { l } else { 0 }];
             for (vi, p) in t.iter().enumerate() {
                 for a in 0..3 {
@@ -358,6 +360,12 @@ impl Tri4 {
     pub fn corners(&self, l: usize) -> [Vec3A; 3] {
         std::array::from_fn(|vi| Vec3A::new(self.v[vi][0][l], self.v[vi][1][l], self.v[vi][2][l]))
     }
+
+    /// Lanes `4 h .. 4 h + 4` of row `a` of vertex `vi`.
+    #[inline(always)]
+    fn half(&self, vi: usize, a: usize, h: usize) -> Vec4 {
+        Vec4::from_slice(&self.v[vi][a][4 * h..4 * h + 4])
+    }
 }
 
 impl WatertightRay {
@@ -375,12 +383,13 @@ impl WatertightRay {
     #[inline(always)]
     pub fn intersect4(
         &self,
-        block: &Tri4,
+        block: &Tri8,
         count: u32,
         t_min: f32,
         mut t_max: f32,
     ) -> Option<(u32, f32, f32, f32)> {
-        let (lanes, e, bound) = self.edges4(block);
+        debug_assert!(count <= 4);
+        let (lanes, e, bound) = self.edges4(block, 0);
         let interesting = lanes & ((1u32 << count) - 1);
         if interesting == 0 {
             return None;
@@ -396,8 +405,7 @@ impl WatertightRay {
     }
 
     /// The nearest hit among the `count` (1 to 8) triangles of a leaf
-    /// stored as two blocks (`blocks[0]` holds triangles 0 to 3,
-    /// `blocks[1]` the rest), as `(lane, t, b1, b2)` with lane `l` the
+    /// stored side by side in `block`, as `(lane, t, b1, b2)` with lane `l` the
     /// leaf's triangle `l`: [`Self::intersect4`] over eight lanes, one
     /// 8-wide pass with `AVX` (valid only on a CPU with AVX2, see
     /// [`crate::core::simd`]), two 4-wide ones otherwise. Every lane
@@ -407,26 +415,26 @@ impl WatertightRay {
     #[inline(always)]
     pub fn intersect8<const AVX: bool>(
         &self,
-        blocks: [&Tri4; 2],
+        block: &Tri8,
         count: u32,
         t_min: f32,
         mut t_max: f32,
     ) -> Option<(u32, f32, f32, f32)> {
         if count <= 4 {
-            return self.intersect4(blocks[0], count, t_min, t_max);
+            return self.intersect4(block, count, t_min, t_max);
         }
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: `AVX` is set only by the AVX2 entry points, which run
             // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
             #[allow(unsafe_code)]
-            let (lanes, e, bound) = unsafe { self.edges8_avx2(blocks) };
+            let (lanes, e, bound) = unsafe { self.edges8_avx2(block) };
             let interesting = lanes & ((1u32 << count) - 1);
             if interesting == 0 {
                 return None;
             }
             return self.finish(
-                |l| blocks[l / 4].corners(l % 4),
+                |l| block.corners(l),
                 interesting,
                 &e,
                 &bound,
@@ -434,8 +442,8 @@ impl WatertightRay {
                 &mut t_max,
             );
         }
-        let (lo, e0, b0) = self.edges4(blocks[0]);
-        let (hi, e1, b1) = self.edges4(blocks[1]);
+        let (lo, e0, b0) = self.edges4(block, 0);
+        let (hi, e1, b1) = self.edges4(block, 1);
         let interesting = (lo | hi << 4) & ((1u32 << count) - 1);
         if interesting == 0 {
             return None;
@@ -446,7 +454,7 @@ impl WatertightRay {
             })
         };
         self.finish(
-            |l| blocks[l / 4].corners(l % 4),
+            |l| block.corners(l),
             interesting,
             &join(&e0, &e1),
             &join(&b0, &b1),
@@ -459,7 +467,7 @@ impl WatertightRay {
     /// `block`, and the lanes that need the re-check or whose edge test
     /// passed (all four lanes; the caller masks the unused ones).
     #[inline(always)]
-    fn edges4(&self, block: &Tri4) -> (u32, [[f32; 4]; 3], [[f32; 4]; 3]) {
+    fn edges4(&self, block: &Tri8, h: usize) -> (u32, [[f32; 4]; 3], [[f32; 4]; 3]) {
         let [kx, ky, kz] = self.k.map(usize::from);
         let sx = Vec4::splat(self.shear.x);
         let sy = Vec4::splat(self.shear.y);
@@ -470,10 +478,9 @@ impl WatertightRay {
         );
         // Per vertex: sheared x, y; largest |coordinate|; |x| + |y|.
         let vertex = |vi: usize| {
-            let v = &block.v[vi];
-            let rx = Vec4::from_array(v[kx]) - ox;
-            let ry = Vec4::from_array(v[ky]) - oy;
-            let rz = Vec4::from_array(v[kz]) - oz;
+            let rx = block.half(vi, kx, h) - ox;
+            let ry = block.half(vi, ky, h) - oy;
+            let rz = block.half(vi, kz, h) - oz;
             let x = rx - sx * rz;
             let y = ry - sy * rz;
             // Exact maxima (no NaN here): the value `max_element` gives.
@@ -490,7 +497,7 @@ impl WatertightRay {
         edge_lanes4([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
     }
 
-    /// [`Self::edges4`] for the eight lanes of two blocks in AVX
+    /// [`Self::edges4`] for the eight lanes of a block in AVX
     /// registers: the same operations in the same order.
     ///
     /// # Safety
@@ -500,18 +507,14 @@ impl WatertightRay {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(unsafe_code)]
-    unsafe fn edges8_avx2(&self, blocks: [&Tri4; 2]) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
+    unsafe fn edges8_avx2(&self, block: &Tri8) -> (u32, [[f32; 8]; 3], [[f32; 8]; 3]) {
         // SAFETY: the caller runs on a CPU with AVX2 and FMA.
         unsafe {
             use std::arch::x86_64::*;
             let [kx, ky, kz] = self.k.map(usize::from);
             let row = {
                 #[inline(always)]
-                |vi: usize, a: usize| -> __m256 {
-                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][a]);
-                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][a]);
-                    _mm256_set_m128(hi, lo)
-                }
+                |vi: usize, a: usize| -> __m256 { _mm256_load_ps(block.v[vi][a].as_ptr()) }
             };
             let sign = _mm256_set1_ps(-0.0);
             let abs = {
@@ -612,7 +615,7 @@ impl WatertightRay {
     }
 }
 
-/// The part of the eight-triangle test of a leaf (two [`Tri4`] blocks)
+/// The part of the eight-triangle test of a leaf (a [`Tri8`] block)
 /// that does not depend on the ray's direction, shared by the rays of a
 /// packet that start at the same point and have the same axis
 /// permutation (the camera rays of a pinhole): each vertex minus the
@@ -640,10 +643,10 @@ impl WatertightRay {
     }
 
     /// The [`LeafFrame`] of a leaf of `count` triangles stored as two
-    /// blocks, for rays that share this ray's origin and permutation. `AVX`
+    /// block, for rays that share this ray's origin and permutation. `AVX`
     /// as in [`Self::intersect8`].
     #[inline(always)]
-    pub fn frame8<const AVX: bool>(&self, blocks: [&Tri4; 2], count: u32) -> LeafFrame {
+    pub fn frame8<const AVX: bool>(&self, block: &Tri8, count: u32) -> LeafFrame {
         let mut f = LeafFrame {
             r: [[[0.0; 8]; 3]; 3],
             tm: [[0.0; 8]; 3],
@@ -654,7 +657,7 @@ impl WatertightRay {
             // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
             #[allow(unsafe_code)]
             unsafe {
-                self.frame8_avx2(blocks, &mut f)
+                self.frame8_avx2(block, &mut f)
             };
             return f;
         }
@@ -666,14 +669,13 @@ impl WatertightRay {
         ];
         let tol = Vec4::splat(8.0 * f32::EPSILON);
         let halves = if count <= 4 { 1 } else { 2 };
-        for (h, block) in blocks.iter().enumerate().take(halves) {
+        for h in 0..halves {
             let mut m = [Vec4::ZERO; 3];
             for (vi, mv) in m.iter_mut().enumerate() {
-                let v = &block.v[vi];
                 let r = [
-                    Vec4::from_array(v[kx]) - o[0],
-                    Vec4::from_array(v[ky]) - o[1],
-                    Vec4::from_array(v[kz]) - o[2],
+                    block.half(vi, kx, h) - o[0],
+                    block.half(vi, ky, h) - o[1],
+                    block.half(vi, kz, h) - o[2],
                 ];
                 for (a, ra) in r.iter().enumerate() {
                     f.r[vi][a][4 * h..4 * h + 4].copy_from_slice(&ra.to_array());
@@ -696,7 +698,7 @@ impl WatertightRay {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     #[allow(unsafe_code)]
-    unsafe fn frame8_avx2(&self, blocks: [&Tri4; 2], f: &mut LeafFrame) {
+    unsafe fn frame8_avx2(&self, block: &Tri8, f: &mut LeafFrame) {
         // SAFETY: the caller runs on a CPU with AVX2 and FMA.
         unsafe {
             use std::arch::x86_64::*;
@@ -707,9 +709,10 @@ impl WatertightRay {
             let mut m = [_mm256_setzero_ps(); 3];
             for (vi, mv) in m.iter_mut().enumerate() {
                 for (a, &ka) in k.iter().enumerate() {
-                    let lo: __m128 = bytemuck::cast(blocks[0].v[vi][ka]);
-                    let hi: __m128 = bytemuck::cast(blocks[1].v[vi][ka]);
-                    let r = _mm256_sub_ps(_mm256_set_m128(hi, lo), _mm256_set1_ps(self.origin[ka]));
+                    let r = _mm256_sub_ps(
+                        _mm256_load_ps(block.v[vi][ka].as_ptr()),
+                        _mm256_set1_ps(self.origin[ka]),
+                    );
                     f.r[vi][a] = bytemuck::cast(r);
                     let abs = _mm256_andnot_ps(sign, r);
                     // max(max(|x|, |y|), |z|), in the order of `edges8_avx2`.
@@ -726,12 +729,12 @@ impl WatertightRay {
 
     /// [`Self::intersect8`] with the direction-independent part taken
     /// from `frame`, made by a ray that [`Self::shares_frame`] with this
-    /// one for the same `blocks`: the same result, bit for bit.
+    /// one for the same `block`: the same result, bit for bit.
     #[inline(always)]
     pub fn intersect8_framed<const AVX: bool>(
         &self,
         frame: &LeafFrame,
-        blocks: [&Tri4; 2],
+        block: &Tri8,
         count: u32,
         t_min: f32,
         mut t_max: f32,
@@ -746,7 +749,7 @@ impl WatertightRay {
                 return None;
             }
             return self.finish(
-                |l| blocks[l / 4].corners(l % 4),
+                |l| block.corners(l),
                 interesting,
                 &e,
                 &bound,
@@ -785,7 +788,7 @@ impl WatertightRay {
             return None;
         }
         self.finish(
-            |l| blocks[l / 4].corners(l % 4),
+            |l| block.corners(l),
             interesting,
             &e,
             &bound,
@@ -885,7 +888,7 @@ impl WatertightRay {
         rays: &[WatertightRay; 16],
         shears: &Shears16,
         frame: &LeafFrame,
-        blocks: [&Tri4; 2],
+        block: &Tri8,
         count: u32,
         lanes: u32,
         t_min: &[f32; 16],
@@ -914,7 +917,7 @@ impl WatertightRay {
             if pass == 0 {
                 continue;
             }
-            let corners = blocks[j / 4].corners(j % 4);
+            let corners = block.corners(j);
             while pass != 0 {
                 let l = pass.trailing_zeros() as usize;
                 pass &= pass - 1;
@@ -1303,17 +1306,12 @@ mod tests {
             let bits = |h: Option<(u32, f32, f32, f32)>| {
                 h.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
             };
-            let first = Tri4::new(&tris[..count.min(4)], 0);
-            let second = if count > 4 {
-                Tri4::new(&tris[4..count], 4)
-            } else {
-                Tri4 { count: 0, ..first }
-            };
+            let block = Tri8::new(&tris[..count], 0);
             if count <= 4 {
-                let got = bits(wt.intersect4(&first, count as u32, 0.0, f32::INFINITY));
+                let got = bits(wt.intersect4(&block, count as u32, 0.0, f32::INFINITY));
                 assert_eq!(got, want, "case {k}, four wide");
             }
-            let pair = [&first, &second];
+            let pair = &block;
             let got = bits(wt.intersect8::<false>(pair, count as u32, 0.0, f32::INFINITY));
             assert_eq!(got, want, "case {k}, portable");
             if avx2 {
@@ -1363,13 +1361,8 @@ mod tests {
                 tris.push([p0, p1, p2]);
             }
             let count = 1 + k % 8;
-            let first = Tri4::new(&tris[..count.min(4)], 0);
-            let second = if count > 4 {
-                Tri4::new(&tris[4..count], 4)
-            } else {
-                Tri4 { count: 0, ..first }
-            };
-            let blocks = [&first, &second];
+            let block = Tri8::new(&tris[..count], 0);
+            let blocks = &block;
             // The fan: around the diagonal between axis `a` and the next,
             // on the side `sign`, from a distance.
             let a = k % 3;
