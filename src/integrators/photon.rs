@@ -136,6 +136,7 @@ pub fn render(
             .pixels_mut()
             .par_chunks_mut(w as usize)
             .enumerate()
+            .with_max_len(1)
             .map(|(y, row)| {
                 let mut counters = RenderCounters::default();
                 for (x, sum) in row.iter_mut().enumerate() {

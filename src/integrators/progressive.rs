@@ -85,6 +85,7 @@ impl Accumulator {
             .pixels_mut()
             .par_chunks_mut(width)
             .enumerate()
+            .with_max_len(1)
             .map(|(y, row)| {
                 let mut counters = RenderCounters::default();
                 for (x, sum) in row.iter_mut().enumerate() {

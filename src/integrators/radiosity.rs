@@ -120,6 +120,7 @@ pub fn render(
         .pixels
         .par_chunks_mut(w as usize)
         .enumerate()
+        .with_max_len(1)
         .map(|(y, row)| {
             let y = y as u32;
             let mut counters = RenderCounters::default();

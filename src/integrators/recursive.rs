@@ -501,6 +501,7 @@ fn render_rows<T: Send>(
     );
     out.par_chunks_mut(map.columns() as usize)
         .zip(map.rows().par_iter())
+        .with_max_len(1)
         .map(|(row, &y)| {
             let mut counters = RenderCounters::default();
             if packets {

@@ -274,7 +274,7 @@ fn trace(mesh: &Mesh, set: &RaySet, mode: Mode, out: &mut [Option<MeshHit>]) {
     } else {
         CHUNK
     };
-    let chunks = out.par_chunks_mut(size).enumerate();
+    let chunks = out.par_chunks_mut(size).enumerate().with_max_len(1);
     match mode {
         Mode::Binned => chunks.for_each_init(
             || (Vec::new(), Vec::new(), Vec::new()),

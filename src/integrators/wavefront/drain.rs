@@ -31,6 +31,7 @@ where
     let used = &mut buffers[..chunks];
     used.par_iter_mut()
         .enumerate()
+        .with_max_len(1)
         .for_each(|(c, buffer)| kernel(c, buffer));
     used
 }

@@ -185,6 +185,7 @@ impl RayQueue {
         )
             .into_par_iter()
             .enumerate()
+            .with_max_len(1)
             .for_each(
                 |(c, (origin, direction, throughput, path, depth, pdf, cone))| {
                     let start = c * CHUNK;

@@ -72,11 +72,15 @@ pub fn generate_camera_rays(
         seeds.clear();
     } else {
         seeds.resize(count, SamplerSeed::default());
-        seeds.par_chunks_mut(CHUNK).enumerate().for_each(|(c, s)| {
-            for (s, k) in s.iter_mut().zip(keys(c * CHUNK)) {
-                *s = seed(&k);
-            }
-        });
+        seeds
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .with_max_len(1)
+            .for_each(|(c, s)| {
+                for (s, k) in s.iter_mut().zip(keys(c * CHUNK)) {
+                    *s = seed(&k);
+                }
+            });
     }
     let seeds: &[SamplerSeed] = seeds;
     out.fill_chunks(count, |range| {
@@ -116,6 +120,7 @@ pub fn path_wavelengths(
     out.resize(seeds.len(), 0.0);
     out.par_chunks_mut(CHUNK)
         .zip(seeds.par_chunks(CHUNK))
+        .with_max_len(1)
         .for_each(|(out, seeds)| {
             for (w, seed) in out.iter_mut().zip(seeds) {
                 *w = path::path_wavelength(scene, settings, &mut seed.sampler()).unwrap_or(0.0);
@@ -165,6 +170,7 @@ pub fn intersect_closest(
         .0
         .par_chunks_mut(CHUNK)
         .enumerate()
+        .with_max_len(1)
         .for_each(|(c, out)| {
             for (k, lanes) in out.chunks_mut(width).enumerate() {
                 let i = c * CHUNK + k * width;
