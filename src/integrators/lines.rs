@@ -291,6 +291,7 @@ pub fn render_lines(
     let bands: Vec<u32> = (0..h.div_ceil(BAND_ROWS)).collect();
     let results: Vec<(Vec<f32>, u64)> = bands
         .par_iter()
+        .with_max_len(1)
         .map(|&b| {
             let y0 = b * BAND_ROWS;
             let rows = BAND_ROWS.min(h - y0);

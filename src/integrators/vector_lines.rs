@@ -364,6 +364,7 @@ pub fn project_edges(
     let size = Vec2::new(width as f32, height as f32);
     let parts: Vec<(Vec<Segment2>, u64)> = edges
         .par_chunks(256)
+        .with_max_len(1)
         .map(|chunk| {
             let mut out = Vec::new();
             let mut rays = 0;

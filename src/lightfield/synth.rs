@@ -232,6 +232,7 @@ pub fn synthesise(
         .pixels
         .par_chunks_mut(width as usize)
         .enumerate()
+        .with_max_len(1)
         .map(|(y, row)| {
             let mut outside = 0;
             for (x, px) in row.iter_mut().enumerate() {
