@@ -1114,6 +1114,18 @@ unsafe fn edge_lanes8_avx2(
 mod tests {
     use super::*;
 
+    /// Numbers in `[-1, 1)` from a 64-bit LCG seeded with `seed`: each
+    /// test's own repeatable stream.
+    fn uniform(seed: u64) -> impl FnMut() -> f32 {
+        let mut s = seed;
+        move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        }
+    }
+
     /// [`WatertightRay::lanes`] prepares every lane as
     /// [`WatertightRay::new`] does, bit for bit: random directions, and
     /// directions whose components tie in magnitude (every pair, with
@@ -1121,13 +1133,7 @@ mod tests {
     /// of 8 and 16.
     #[test]
     fn packet_lanes_are_new_rays_bit_for_bit() {
-        let mut s = 77u64;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut next = uniform(77);
         let specials = [0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0];
         let mut rays = Vec::new();
         for i in 0..4096 {
@@ -1182,13 +1188,7 @@ mod tests {
     /// signs, negative, tiny and infinite values.
     #[test]
     fn plane_distance_decides_as_the_division() {
-        let mut s = 5u64;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut next = uniform(5);
         let (mut early, mut divided) = (0, 0);
         for k in 0..4000 {
             let tri: [Vec3A; 3] = std::array::from_fn(|_| Vec3A::new(next(), next(), next()) * 3.0);
@@ -1255,13 +1255,7 @@ mod tests {
     #[test]
     fn side_by_side_lanes_equal_one_at_a_time() {
         let avx2 = crate::core::simd::supported(crate::core::simd::Isa::Avx2);
-        let mut s = 11u64;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut next = uniform(11);
         let mut hits = 0;
         for k in 0..8000 {
             let mut tris: Vec<[Vec3A; 3]> = Vec::new();
@@ -1335,13 +1329,7 @@ mod tests {
     #[test]
     fn framed_lanes_equal_the_eight_triangle_test() {
         let avx2 = crate::core::simd::supported(crate::core::simd::Isa::Avx2);
-        let mut s = 5u64;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut next = uniform(5);
         let bits = |h: Option<(u32, f32, f32, f32)>| {
             h.map(|(l, t, b1, b2)| (l, t.to_bits(), b1.to_bits(), b2.to_bits()))
         };
