@@ -401,6 +401,7 @@ pub fn sync_geometry_and_materials(
 /// Commits the frame's changes to the top-level BVH and publishes the
 /// report in [`Frame::update`].
 pub fn commit_scene(
+    config: Res<RenderConfig>,
     mut sync: ResMut<SceneSync>,
     mut accel: ResMut<SceneAccel>,
     mut frame: ResMut<Frame>,
@@ -408,6 +409,7 @@ pub fn commit_scene(
     let start = Instant::now();
     let sync_seconds = sync.start.take().map_or(0.0, |s| (start - s).as_secs_f64());
     let scene = scene_mut(&mut accel);
+    scene.set_mesh_merging(config.merge_meshes);
     let update = scene.commit();
     let counters = scene.tlas_counters();
     let origin = scene.origin();

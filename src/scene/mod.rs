@@ -9,6 +9,7 @@ pub mod features;
 pub mod instance;
 pub mod light;
 pub mod material;
+pub(crate) mod merged;
 pub mod panorama;
 pub mod polygons;
 pub mod query;

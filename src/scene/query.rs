@@ -10,7 +10,21 @@ use crate::accel::single::traverse_bvh;
 use crate::core::math::{Ray, one_octant};
 use crate::geometry::mesh::{Mesh, MeshHit};
 use crate::scene::instance::{Hit, Instance, InstanceGeometry, LocalHit, to_object};
+use crate::scene::merged::MERGED;
 use crate::scene::render_scene::RenderScene;
+
+/// `ray` in the space of instance `index`: its object space, or the
+/// render frame itself for the merged group (whose corners are there;
+/// never transformed, so that every query sees the same ray, signed
+/// zeros included).
+#[inline(always)]
+fn local_ray(index: u32, inst: &Instance, ray: &Ray) -> Ray {
+    if index == MERGED {
+        *ray
+    } else {
+        to_object(inst, ray)
+    }
+}
 
 /// Rays per call of [`RenderScene::intersect_coherent`]: one packet of
 /// 16 on the AVX-512 path, two packets of 8 elsewhere.
@@ -262,6 +276,12 @@ impl RenderScene {
                 best = Some((t, i, h));
             }
         }
+        if let Some(g) = &self.merged
+            && let Some(h) = g.mesh().intersect_kernel::<AVX>(ray, t_min, t_max)
+        {
+            t_max = h.t;
+            best = Some((h.t, MERGED, LocalHit::Mesh(h)));
+        }
         if !self.tlas.leaf_instances.is_empty() {
             traverse_bvh::<AVX>(
                 &self.tlas.bvh,
@@ -292,6 +312,11 @@ impl RenderScene {
             if self.occludes_instance::<AVX>(i, ray, t_min, t_max) {
                 return true;
             }
+        }
+        if let Some(g) = &self.merged
+            && g.mesh().occluded_kernel::<AVX>(ray, t_min, t_max)
+        {
+            return true;
         }
         if self.tlas.leaf_instances.is_empty() {
             return false;
@@ -353,6 +378,10 @@ impl RenderScene {
             }
         }
         let mut packet = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+        if let Some(g) = &self.merged {
+            let all = packet.valid;
+            mesh(&mut packet, all, MERGED, &g.instance, g.mesh(), best);
+        }
         let bvh = &self.tlas.bvh;
         let all = packet.valid;
         packet.traverse_bvh::<AVX, AVX512>(
@@ -411,13 +440,20 @@ impl RenderScene {
             rays,
             out,
             #[inline(always)]
-            |p, lanes, inst, m, hits| {
+            |p, lanes, index, inst, m, hits| {
                 if mesh_packets {
                     let mut local = Packet::new(&[], &[], &[]);
                     for_each_lane(
                         lanes,
                         #[inline(always)]
-                        |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
+                        |l| {
+                            local.set_lane(
+                                l,
+                                local_ray(index, inst, &p.rays[l]),
+                                p.t_min[l],
+                                p.t_max[l],
+                            )
+                        },
                     );
                     m.intersect_packet_kernel::<AVX>(&mut local, lanes, hits);
                 } else {
@@ -426,7 +462,7 @@ impl RenderScene {
                         #[inline(always)]
                         |l| {
                             hits[l] = m.intersect_for_surface_kernel::<AVX>(
-                                &to_object(inst, &p.rays[l]),
+                                &local_ray(index, inst, &p.rays[l]),
                                 p.t_min[l],
                                 p.t_max[l],
                             );
@@ -450,12 +486,19 @@ impl RenderScene {
             rays,
             out,
             #[inline(always)]
-            |p, lanes, inst, m, hits| {
+            |p, lanes, index, inst, m, hits| {
                 let mut local = Packet16::new(&[], &[], &[]);
                 for_each_lane(
                     lanes,
                     #[inline(always)]
-                    |l| local.set_lane(l, to_object(inst, &p.rays[l]), p.t_min[l], p.t_max[l]),
+                    |l| {
+                        local.set_lane(
+                            l,
+                            local_ray(index, inst, &p.rays[l]),
+                            p.t_min[l],
+                            p.t_max[l],
+                        )
+                    },
                 );
                 m.intersect_packet16_kernel::<AVX, AVX512>(&mut local, lanes, hits);
             },
@@ -472,7 +515,14 @@ impl RenderScene {
         &self,
         rays: &[Ray],
         out: &mut [Option<Hit>],
-        mut mesh_hits: impl FnMut(&PacketOf<N>, LaneMask, &Instance, &Mesh, &mut [Option<MeshHit>; N]),
+        mut mesh_hits: impl FnMut(
+            &PacketOf<N>,
+            LaneMask,
+            u32,
+            &Instance,
+            &Mesh,
+            &mut [Option<MeshHit>; N],
+        ),
     ) where
         PacketOf<N>: PacketTraversal,
     {
@@ -484,7 +534,7 @@ impl RenderScene {
             #[inline(always)]
             |p, lanes, index, inst, m, best| {
                 let mut hits = [None; N];
-                mesh_hits(p, lanes, inst, m, &mut hits);
+                mesh_hits(p, lanes, index, inst, m, &mut hits);
                 for_each_lane(
                     lanes,
                     #[inline(always)]
@@ -590,10 +640,7 @@ impl RenderScene {
                         lanes,
                         #[inline(always)]
                         |l| {
-                            let d = inst
-                                .transform
-                                .to_object
-                                .transform_vector3a(p.rays[l].direction);
+                            let d = local_ray(index, inst, &p.rays[l]).direction;
                             let octant = (d.x < 0.0) as u64
                                 | ((d.y < 0.0) as u64) << 1
                                 | ((d.z < 0.0) as u64) << 2;
@@ -609,7 +656,10 @@ impl RenderScene {
         while let Some(&key) = rest.first() {
             let group = rest.partition_point(|&k| k >> 32 == key >> 32);
             let index = (key >> 35) as u32;
-            let inst = &self.instances[index as usize];
+            let inst = match &self.merged {
+                Some(g) if index == MERGED => &g.instance,
+                _ => &self.instances[index as usize],
+            };
             let InstanceGeometry::Mesh(mesh) = &inst.geometry else {
                 unreachable!("only meshes are deferred")
             };
@@ -617,7 +667,7 @@ impl RenderScene {
             for &k in &rest[..group] {
                 let i = (k & RAY_BITS) as usize;
                 let t_max = best[i].as_ref().map_or(f32::INFINITY, |b| b.0);
-                stream.push(to_object(inst, &rays[i]), 0.0, t_max);
+                stream.push(local_ray(index, inst, &rays[i]), 0.0, t_max);
             }
             mesh.intersect_stream_kernel::<AVX>(stream, wt, mesh_hits);
             for (&k, h) in rest[..group].iter().zip(mesh_hits.iter()) {
@@ -697,6 +747,24 @@ impl RenderScene {
             }
         }
         let mut packet = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+        if let Some(g) = &self.merged {
+            let lanes = packet.valid & !blocked;
+            let m = g.mesh();
+            if lanes != 0 && (!mesh_packets || m.single_leaf()) {
+                for_each_lane(
+                    lanes,
+                    #[inline(always)]
+                    |l| {
+                        if m.occluded_kernel::<AVX>(&rays[l], 0.0, t_max[l]) {
+                            blocked |= 1 << l;
+                        }
+                    },
+                );
+            } else if lanes != 0 {
+                let mut local = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+                blocked |= mesh_packet(m, &mut local, lanes);
+            }
+        }
         let todo = packet.valid & !blocked;
         let bvh = &self.tlas.bvh;
         packet.traverse_bvh::<AVX, AVX512>(
@@ -792,7 +860,16 @@ impl RenderScene {
     pub fn intersect_brute_force(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
+        if let Some(g) = &self.merged
+            && let Some(h) = g.mesh().intersect_brute_force(ray, t_min, t_max)
+        {
+            t_max = h.t;
+            best = Some((h.t, MERGED, LocalHit::Mesh(h)));
+        }
         for i in 0..self.instances.len() as u32 {
+            if self.merged.as_ref().is_some_and(|g| g.is_member(i)) {
+                continue;
+            }
             if let Some((t, h)) = self.intersect_instance_with::<false>(i, ray, t_min, t_max, true)
             {
                 t_max = t;
@@ -804,6 +881,14 @@ impl RenderScene {
     }
 
     pub(super) fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
+        // A hit on the merged group becomes one on the instance it merged.
+        let (index, local) = match (&self.merged, local) {
+            (Some(g), LocalHit::Mesh(h)) if index == MERGED => {
+                let (instance, triangle) = g.owner(h.triangle);
+                (instance, LocalHit::Mesh(MeshHit { triangle, ..h }))
+            }
+            _ => (index, local),
+        };
         let inst = &self.instances[index as usize];
         let xf = &inst.transform;
         // The point comes from the object-space surface point, correct to a

@@ -4,12 +4,13 @@
 use std::time::Instant;
 
 use crate::accel::build::BuildQuality;
-use crate::accel::tlas::Tlas;
+use crate::accel::tlas::{Placement, Tlas};
 use crate::core::math::Color;
 use crate::core::medium::Medium;
 use crate::scene::emitters::EmitterTable;
 use crate::scene::environment::Environment;
 use crate::scene::instance::{Instance, InstanceGeometry};
+use crate::scene::merged::MergedMeshes;
 use glam::{DVec3, Vec2};
 
 use crate::geometry::transform::Transform;
@@ -74,6 +75,16 @@ pub struct RenderScene {
     /// The medium that fills the space outside every object (a global
     /// fog), if any.
     pub(super) fog: Option<Medium>,
+    /// Single-use mesh instances merged under one BVH, if
+    /// [`RenderScene::set_mesh_merging`] asked for it and a commit found
+    /// at least two; their instances are then out of the top level.
+    pub(super) merged: Option<MergedMeshes>,
+    /// Merging is asked for ([`RenderScene::set_mesh_merging`]).
+    pub(super) merge_requested: bool,
+    /// Merging was asked for and the next commit should try it.
+    pub(super) merge_pending: bool,
+    /// BVH build preset, for the merged group.
+    pub(super) quality: BuildQuality,
 }
 
 impl RenderScene {
@@ -131,6 +142,76 @@ impl RenderScene {
             emitters_stale: false,
             tlas,
             tlas_build_seconds: start.elapsed().as_secs_f64(),
+            merged: None,
+            merge_requested: false,
+            merge_pending: false,
+            quality,
+        }
+    }
+
+    /// Asks the next [`RenderScene::commit`] to merge the scene's
+    /// single-use mesh instances under one BVH (`true`), or undoes a
+    /// merge (`false`). A merged group is an acceleration structure only:
+    /// hits report the instances and triangles they always did, computed
+    /// in the render frame instead of object space (the last bits of `t`
+    /// and of the barycentrics may differ). It is undone by the first
+    /// change that touches a member (a move, new geometry, removal, an
+    /// alpha material, a new render origin) and not redone after, so it
+    /// suits scenes that stand still; see `scene::merged`. Asking again
+    /// while it is asked for does nothing (a frame loop may ask every
+    /// frame).
+    pub fn set_mesh_merging(&mut self, merge: bool) {
+        if merge == self.merge_requested {
+            return;
+        }
+        self.merge_requested = merge;
+        self.merge_pending = merge;
+        if !merge {
+            self.dissolve_merged();
+        }
+    }
+
+    /// Number of instances in the merged group (0 without one).
+    pub fn merged_instances(&self) -> usize {
+        self.merged.as_ref().map_or(0, |m| m.member_count())
+    }
+
+    /// Bytes of the merged group's BVH, triangles and triangle owners (0
+    /// without one).
+    pub fn merged_bytes(&self) -> usize {
+        self.merged.as_ref().map_or(0, |m| m.bytes())
+    }
+
+    /// Builds the merged group if merging is pending (at most once per
+    /// request) and takes its members out of the top level.
+    pub(super) fn merge_if_pending(&mut self) {
+        if !self.merge_pending || self.merged.is_some() {
+            return;
+        }
+        self.merge_pending = false;
+        let materials = &self.materials;
+        let cutouts = self.cutouts;
+        let cut_out = |inst: &Instance| {
+            cutouts
+                && materials
+                    .get(inst.material as usize)
+                    .is_none_or(|m| m.alpha.is_some())
+        };
+        self.merged = MergedMeshes::build(&self.instances, cut_out, self.quality);
+        if let Some(m) = &self.merged {
+            for i in m.members() {
+                self.tlas.updated(i, Placement::Nowhere);
+            }
+        }
+    }
+
+    /// Undoes the merged group: its members go back into the top level
+    /// (at the next commit).
+    pub(super) fn dissolve_merged(&mut self) {
+        if let Some(m) = self.merged.take() {
+            for i in m.members() {
+                self.tlas.updated(i, self.instances[i as usize].placement());
+            }
         }
     }
 

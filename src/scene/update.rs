@@ -30,6 +30,9 @@ impl RenderScene {
         let index = self.instances.len() as u32;
         self.tlas.inserted(index, instance.placement());
         self.instances.push(instance);
+        if let Some(m) = &mut self.merged {
+            m.pushed();
+        }
         index
     }
 
@@ -44,6 +47,16 @@ impl RenderScene {
         );
         self.emitters_stale = true;
         let last = self.instances.len() as u32 - 1;
+        if self
+            .merged
+            .as_ref()
+            .is_some_and(|m| m.is_member(index) || m.is_member(last))
+        {
+            self.dissolve_merged();
+        }
+        if let Some(m) = &mut self.merged {
+            m.swap_removed(index);
+        }
         self.tlas.removing(index, last);
         self.instances.swap_remove(index as usize)
     }
@@ -52,6 +65,7 @@ impl RenderScene {
     /// ([`Transform::is_valid`]).
     pub fn set_instance_transform(&mut self, index: u32, transform: &Transform) {
         self.emitters_stale = true;
+        self.dissolve_if_member(index);
         let inst = &mut self.instances[index as usize];
         inst.world = *transform;
         inst.rebase(self.origin);
@@ -62,6 +76,7 @@ impl RenderScene {
     /// reused as it is).
     pub fn set_instance_geometry(&mut self, index: u32, geometry: InstanceGeometry) {
         self.emitters_stale = true;
+        self.dissolve_if_member(index);
         let inst = &mut self.instances[index as usize];
         inst.geometry = geometry;
         self.tlas.updated(index, inst.placement());
@@ -70,6 +85,14 @@ impl RenderScene {
     /// Points instance `index` at material `material`.
     pub fn set_instance_material(&mut self, index: u32, material: u32) {
         self.emitters_stale = true;
+        // A merged instance may not be cut away by its material.
+        if self
+            .materials
+            .get(material as usize)
+            .is_none_or(|m| m.alpha.is_some())
+        {
+            self.dissolve_if_member(index);
+        }
         self.instances[index as usize].material = material;
     }
 
@@ -88,6 +111,13 @@ impl RenderScene {
     /// Replaces material `index`. Touches no BVH.
     pub fn set_material(&mut self, index: u32, material: Material) {
         self.emitters_stale = true;
+        if material.alpha.is_some()
+            && let Some(m) = &self.merged
+            && m.members()
+                .any(|i| self.instances[i as usize].material == index)
+        {
+            self.dissolve_merged();
+        }
         self.surfaces[index as usize] = constant_surface(&material);
         self.materials[index as usize] = material;
         self.cutouts = has_cutouts(&self.materials);
@@ -139,6 +169,8 @@ impl RenderScene {
         }
         self.origin = origin;
         self.emitters_stale = true;
+        // The merged corners are in the old frame.
+        self.dissolve_merged();
         for (i, inst) in self.instances.iter_mut().enumerate() {
             inst.rebase(origin);
             self.tlas.updated(i as u32, inst.placement());
@@ -164,14 +196,24 @@ impl RenderScene {
             self.emitters = EmitterTable::build(&self.instances, &self.materials);
             self.emitters_stale = false;
         }
+        self.merge_if_pending();
+        let merged = &self.merged;
         let instances = &self.instances;
-        let update = self
-            .tlas
-            .commit(instances.len(), |i| instances[i].placement());
+        let update = self.tlas.commit(instances.len(), |i| match merged {
+            Some(m) if m.is_member(i as u32) => crate::accel::tlas::Placement::Nowhere,
+            _ => instances[i].placement(),
+        });
         if update != TlasUpdate::Unchanged {
             self.tlas_build_seconds = self.tlas.last_seconds;
         }
         update
+    }
+
+    /// Undoes the merged group if instance `index` is in it.
+    fn dissolve_if_member(&mut self, index: u32) {
+        if self.merged.as_ref().is_some_and(|m| m.is_member(index)) {
+            self.dissolve_merged();
+        }
     }
 
     /// Cumulative work done on the top level.

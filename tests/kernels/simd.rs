@@ -14,7 +14,7 @@ use prism::core::math::Ray;
 use prism::core::simd::{self, Isa};
 use prism::scene::{Hit, RenderScene, StreamScratch};
 
-use crate::bvh::random_scene;
+use crate::bvh::{merged_scene, random_scene};
 use crate::common::rng::{Random, SamplerRng as Rng};
 
 /// Everything every query mode returns for `rays`, as bits.
@@ -89,12 +89,22 @@ fn rays(rng: &mut Rng, offset: Vec3A) -> (Vec<Ray>, Vec<f32>) {
 
 #[test]
 fn portable_and_avx2_paths_give_identical_hits() {
+    portable_and_avx2_paths_give_identical_hits_with(random_scene);
+}
+
+/// [`portable_and_avx2_paths_give_identical_hits`] on a scene whose single-use mesh instances are merged.
+#[test]
+fn portable_and_avx2_paths_give_identical_hits_merged() {
+    portable_and_avx2_paths_give_identical_hits_with(merged_scene);
+}
+
+fn portable_and_avx2_paths_give_identical_hits_with(make: fn(&mut Rng, bool) -> RenderScene) {
     if !simd::supported(Isa::Avx2) {
         eprintln!("skipped: this CPU has no AVX2 and FMA");
         return;
     }
     let mut rng = Rng::new(2024);
-    let scene = random_scene(&mut rng, true);
+    let scene = make(&mut rng, true);
     let mut compared = 0;
     for offset in [Vec3A::ZERO, Vec3A::new(3.0e4, -2.0e4, 1.0e4)] {
         let (rays, t_max) = rays(&mut rng, offset);

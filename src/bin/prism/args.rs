@@ -257,6 +257,33 @@ impl BatchPathsFlag {
     }
 }
 
+/// `--merge-meshes` (render, bench, tradeoff).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct MergeFlag {
+    /// Trace the scene's single-use mesh instances under one BVH, in the
+    /// render frame, instead of one BVH per instance under the top level:
+    /// one traversal per ray instead of one per instance reached. Hits
+    /// are the same surfaces; their last bits may differ.
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = MergeArg::On)]
+    pub merge_meshes: MergeArg,
+}
+
+/// Values of `--merge-meshes`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MergeArg {
+    /// Merge (when at least two instances can be).
+    On,
+    /// One BVH per instance, under the top level.
+    Off,
+}
+
+impl MergeFlag {
+    /// True for `on`.
+    pub fn on(&self) -> bool {
+        self.merge_meshes == MergeArg::On
+    }
+}
+
 /// `--tonemap` (render, compare).
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum ToneMapArg {

@@ -73,6 +73,9 @@ pub struct BenchArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     pub batch_paths: BatchPathsFlag,
+    /// `--merge-meshes`.
+    #[command(flatten)]
+    pub merge: crate::args::MergeFlag,
     /// Structures over mesh triangles to measure, each scene loaded once
     /// per structure (comma-separated: bvh, kdtree, grid, brute).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [crate::args::AccelArg::Bvh])]
@@ -264,6 +267,7 @@ fn bench_scene(
         desc,
         RenderConfig {
             settings: settings.clone(),
+            merge_meshes: args.merge.on(),
             ..Default::default()
         },
         0,

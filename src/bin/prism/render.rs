@@ -231,6 +231,9 @@ pub struct RenderArgs {
     /// `--batch-paths`.
     #[command(flatten)]
     batch_paths: BatchPathsFlag,
+    /// `--merge-meshes`.
+    #[command(flatten)]
+    merge: crate::args::MergeFlag,
     /// Render only shard I of N and write it as a shard (an .exr file for
     /// `prism merge`). The image is cut into 4N bands of whole rows (fewer
     /// when it has fewer rows); shard I renders bands I, I+N, I+2N, ... so
@@ -684,6 +687,7 @@ fn render_with_pool(
             integrator: args.integrator.kind(),
             bvh_quality: quality,
             progress,
+            merge_meshes: args.merge.on(),
             ..Default::default()
         },
         args.camera,
@@ -726,6 +730,10 @@ fn render_with_pool(
         .scene
         .as_ref()
         .map_or((0, 0), |s| (s.triangle_count(), s.instances().len()));
+    let (merged_instances, merged_bytes) = accel
+        .scene
+        .as_ref()
+        .map_or((0, 0), |s| (s.merged_instances(), s.merged_bytes()));
     let features = accel
         .scene
         .as_ref()
@@ -817,7 +825,8 @@ fn render_with_pool(
         wall_seconds: wall.elapsed().as_secs_f64(),
         load_seconds,
         accel: mesh_accel.name(),
-        accel_bytes,
+        accel_bytes: accel_bytes + merged_bytes,
+        merged_instances,
         bvh_build_seconds: mesh_build_seconds + tlas_seconds,
         render_seconds,
         rays: rays.into(),

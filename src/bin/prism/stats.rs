@@ -46,8 +46,10 @@ pub struct RenderStats {
     /// Structure over mesh triangles (`bvh`, `kdtree`, `grid`, `brute`).
     pub accel: &'static str,
     /// Bytes of the mesh structures (nodes or cells and triangle lists;
-    /// the top level not counted).
+    /// the top level not counted; the merged group's copy counted).
     pub accel_bytes: usize,
+    /// Mesh instances traced under one merged BVH (`--merge-meshes`).
+    pub merged_instances: usize,
     /// Rendering pixels.
     pub render_seconds: f64,
     /// Rays by kind.

@@ -420,6 +420,8 @@ fn render(
                 integrator,
                 bvh_quality: config.bvh,
                 progress,
+                // As `prism render` renders by default.
+                merge_meshes: true,
                 ..Default::default()
             },
             0,
