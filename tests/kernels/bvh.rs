@@ -133,27 +133,22 @@ pub(crate) fn random_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
     )
 }
 
-/// The instances of a scene like [`random_scene`]'s, but with a mesh of
-/// its own for every mesh instance but two (which share one), and one
-/// instance whose material cuts it out: `(instances, materials)`.
+/// Sixteen mesh instances, each with a mesh of its own (triangle soups
+/// and spheres, as [`random_scene`] places its meshes), and the plane
+/// below them: `(instances, materials)`. Every bounded instance can be
+/// merged.
 fn merge_candidates(rng: &mut Rng, with_plane: bool) -> (Vec<Instance>, Vec<Material>) {
     let mut instances = Vec::new();
-    let shared = Arc::new(soup(rng, 200));
-    for k in 0..60 {
-        let geometry = match k % 4 {
-            0 if k < 8 => InstanceGeometry::Mesh(shared.clone()),
-            0 if k % 8 == 0 => InstanceGeometry::Mesh(Arc::new(soup(rng, 300))),
-            0 => InstanceGeometry::Mesh(Arc::new(uv_sphere(24, 12))),
-            _ => {
-                let shapes = all_shapes();
-                InstanceGeometry::Shape(shapes[k % shapes.len()].clone())
-            }
+    for k in 0..MERGEABLE {
+        let mesh = if k % 2 == 0 {
+            soup(rng, 300)
+        } else {
+            uv_sphere(24, 12)
         };
-        let material = if k == 12 { 1 } else { 0 };
         instances.push(Instance::new(
-            geometry,
+            InstanceGeometry::Mesh(Arc::new(mesh)),
             &random_transform(rng, 6.0),
-            material,
+            0,
         ));
     }
     if with_plane {
@@ -163,22 +158,11 @@ fn merge_candidates(rng: &mut Rng, with_plane: bool) -> (Vec<Instance>, Vec<Mate
             0,
         ));
     }
-    let cut_out = Material {
-        // Opaque everywhere (factor 1 above the cutoff), but an alpha
-        // mode all the same: such an instance stays out of the group.
-        alpha: Some(prism::scene::material::Alpha {
-            mode: prism::scene::material::AlphaMode::Mask { cutoff: 0.5 },
-            factor: 1.0,
-            texture: None,
-        }),
-        ..Material::default()
-    };
-    (instances, vec![Material::default(), cut_out])
+    (instances, vec![Material::default()])
 }
 
-/// Mesh instances of [`merge_candidates`] that can be merged: all but the
-/// two sharing a mesh and the cut-out one.
-const MERGEABLE: usize = 15 - 2 - 1;
+/// Instances of [`merge_candidates`].
+const MERGEABLE: usize = 16;
 
 /// [`merge_candidates`] as a scene with its single-use mesh instances
 /// merged under one BVH ([`RenderScene::set_mesh_merging`]).
@@ -1049,4 +1033,58 @@ fn merged_meshes_find_the_unmerged_hits() {
     merged.set_mesh_merging(true);
     merged.commit();
     assert_eq!(merged.merged_instances(), 0);
+}
+
+/// A group is made only when every bounded instance can join it: one
+/// shape, one instance of a mesh used twice, or one instance whose
+/// material has an alpha mode keeps the scene unmerged (each would leave
+/// a top level beside the group, and a ray would traverse both); the
+/// unbounded plane does not count.
+#[test]
+fn merging_needs_every_bounded_instance() {
+    let mut rng = Rng::new(31);
+    let (instances, materials) = merge_candidates(&mut rng, true);
+    let cut_out = Material {
+        // Opaque everywhere (factor 1 above the cutoff), but an alpha
+        // mode all the same.
+        alpha: Some(prism::scene::material::Alpha {
+            mode: prism::scene::material::AlphaMode::Mask { cutoff: 0.5 },
+            factor: 1.0,
+            texture: None,
+        }),
+        ..Material::default()
+    };
+    let merged = |instances: Vec<Instance>| {
+        let mut scene = RenderScene::new(
+            instances,
+            vec![materials[0].clone(), cut_out.clone()],
+            vec![],
+            Vec3::ZERO,
+            BuildQuality::Medium,
+        );
+        scene.set_mesh_merging(true);
+        scene.commit();
+        scene.merged_instances()
+    };
+    assert_eq!(merged(instances.clone()), MERGEABLE, "meshes and a plane");
+    let mut with_shape = instances.clone();
+    with_shape.push(Instance::new(
+        InstanceGeometry::Shape(Shape::Sphere { radius: 1.0 }),
+        &random_transform(&mut rng, 6.0),
+        0,
+    ));
+    assert_eq!(merged(with_shape), 0, "a shape");
+    let mut shared = instances.clone();
+    shared.push(Instance::new(
+        shared[0].geometry.clone(),
+        &random_transform(&mut rng, 6.0),
+        0,
+    ));
+    assert_eq!(merged(shared), 0, "a mesh used twice");
+    let mut alpha = instances.clone();
+    alpha[3].material = 1;
+    assert_eq!(merged(alpha), 0, "an alpha material");
+    let mut one = instances;
+    one.truncate(1);
+    assert_eq!(merged(one), 0, "a single instance");
 }
