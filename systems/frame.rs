@@ -44,8 +44,8 @@ pub struct RenderConfig {
     pub fog: Option<crate::core::medium::Medium>,
     /// Optional progress callback.
     pub progress: Option<ProgressFn>,
-    /// Merge the scene's single-use mesh instances under one BVH at the
-    /// first commit ([`RenderScene::set_mesh_merging`](crate::scene::RenderScene::set_mesh_merging)):
+    /// Merge the scene's mesh instances under one BVH at the first commit
+    /// when every bounded instance is a single-use mesh ([`RenderScene::set_mesh_merging`](crate::scene::RenderScene::set_mesh_merging)):
     /// faster queries for scenes that stand still; undone, once, by the
     /// first change that touches a merged instance. Off by default.
     pub merge_meshes: bool,

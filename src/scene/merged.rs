@@ -1,8 +1,9 @@
-//! Mesh instances merged into one BVH: the triangles of a scene's
-//! single-use mesh instances, placed in the render frame, under one
-//! mesh BVH, so that a ray traverses one tree instead of the top level
-//! and then one tree per instance it reaches (each visit paying the
-//! ray's transformation to object space and its watertight setup).
+//! Mesh instances merged into one BVH: when every bounded instance of a
+//! scene is a mesh of its own (a glTF file's), their triangles, placed in
+//! the render frame, under one mesh BVH, so that a ray traverses one tree
+//! instead of the top level and then one tree per instance it reaches
+//! (each visit paying the ray's transformation to object space and its
+//! watertight setup). See the README, "Merged mesh instances".
 //!
 //! The group is an acceleration structure only: a hit on it is mapped
 //! back to the instance and triangle it came from

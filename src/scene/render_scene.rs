@@ -75,9 +75,9 @@ pub struct RenderScene {
     /// The medium that fills the space outside every object (a global
     /// fog), if any.
     pub(super) fog: Option<Medium>,
-    /// Single-use mesh instances merged under one BVH, if
-    /// [`RenderScene::set_mesh_merging`] asked for it and a commit found
-    /// at least two; their instances are then out of the top level.
+    /// The scene's mesh instances merged under one BVH, if
+    /// [`RenderScene::set_mesh_merging`] asked for it and a commit could
+    /// merge every bounded instance; they are then out of the top level.
     pub(super) merged: Option<MergedMeshes>,
     /// Merging is asked for ([`RenderScene::set_mesh_merging`]).
     pub(super) merge_requested: bool,
@@ -149,9 +149,10 @@ impl RenderScene {
         }
     }
 
-    /// Asks the next [`RenderScene::commit`] to merge the scene's
-    /// single-use mesh instances under one BVH (`true`), or undoes a
-    /// merge (`false`). A merged group is an acceleration structure only:
+    /// Asks the next [`RenderScene::commit`] to merge the scene's mesh
+    /// instances under one BVH (`true`; done only when every bounded
+    /// instance is a mesh with a BVH used by no other instance and not
+    /// cut out by an alpha material), or undoes a merge (`false`). A merged group is an acceleration structure only:
     /// hits report the instances and triangles they always did, computed
     /// in the render frame instead of object space (the last bits of `t`
     /// and of the barycentrics may differ). It is undone by the first

@@ -260,10 +260,11 @@ impl BatchPathsFlag {
 /// `--merge-meshes` (render, bench, tradeoff).
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct MergeFlag {
-    /// Trace the scene's single-use mesh instances under one BVH, in the
-    /// render frame, instead of one BVH per instance under the top level:
-    /// one traversal per ray instead of one per instance reached. Hits
-    /// are the same surfaces; their last bits may differ.
+    /// When every bounded instance is a mesh used once (a glTF file),
+    /// trace them under one BVH in the render frame instead of one BVH per
+    /// instance under the top level: one traversal per ray instead of one
+    /// per instance reached. Hits are the same surfaces; their last bits
+    /// may differ.
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = MergeArg::On)]
     pub merge_meshes: MergeArg,
 }
