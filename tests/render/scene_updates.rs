@@ -616,3 +616,85 @@ fn area_lights_follow_moves_and_material_changes() {
     world.entity_mut(light).insert(glow(0.0));
     check(&mut world, &mut schedule, "dark");
 }
+
+/// Merged mesh instances in the frame loop (`RenderConfig::merge_meshes`):
+/// three meshes of their own are merged at the first frame, which renders
+/// (path transport, every integrator) what a scene built from scratch and
+/// merged the same way renders; moving one of them undoes the group, and
+/// the next frames render what an unmerged scene built from scratch
+/// renders, as every incremental update does.
+#[test]
+fn merged_meshes_follow_the_frame_loop() {
+    let settings = RenderSettings {
+        width: 24,
+        height: 16,
+        spp: 4,
+        max_depth: 3,
+        seed: 9,
+        transport: Transport::Path,
+        ..Default::default()
+    };
+    let (mut world, mut schedule) = plugin_world(PrismPlugin::new().settings(settings.clone()));
+    world.resource_mut::<RenderConfig>().merge_meshes = true;
+    let knots: Vec<Entity> = meshes()
+        .into_iter()
+        .enumerate()
+        .map(|(k, m)| {
+            world
+                .spawn((
+                    Transform::from_translation(glam::DVec3::new(2.5 * k as f64 - 2.5, 0.0, 0.0)),
+                    MeshInstance(m),
+                    Material::default(),
+                ))
+                .id()
+        })
+        .collect();
+    world.spawn((
+        Transform::from_translation(glam::DVec3::new(0.0, 6.0, 4.0)),
+        Light::Point {
+            intensity: Color::splat(60.0),
+        },
+    ));
+    world.spawn(Camera {
+        look_from: glam::DVec3::new(0.0, 1.0, 9.0),
+        look_at: glam::DVec3::ZERO,
+        ..Default::default()
+    });
+    let check = |world: &mut World, schedule: &mut Schedule, merged: usize, what: &str| {
+        for kind in IntegratorKind::ALL {
+            world.resource_mut::<RenderConfig>().integrator = kind;
+            run_frame(world, schedule);
+            let scene = world.resource::<SceneAccel>().scene.clone().unwrap();
+            assert_eq!(scene.merged_instances(), merged, "{what} {kind:?}");
+            let film = world.resource::<Frame>().film.clone().unwrap();
+            let (mut reference, _) = scene_from_scratch(
+                world,
+                world.resource::<Frame>().update.origin,
+                Color::ZERO,
+                BuildQuality::Medium,
+            )
+            .unwrap();
+            reference.set_mesh_merging(merged > 0);
+            reference.commit();
+            assert_eq!(reference.merged_instances(), merged, "{what}: reference");
+            let mut q = world.query::<&Camera>();
+            let camera = q.single(world).unwrap().clone();
+            let want =
+                prism::integrators::recursive::render(&reference, &camera, &settings, None).0;
+            for (p, r) in film.pixels.iter().zip(&want.pixels) {
+                let d = (*p - *r).abs().max_element();
+                assert!(
+                    d <= 1e-6 || d <= 1e-4 * r.max_element(),
+                    "{what} {kind:?}: {p} vs {r}"
+                );
+            }
+            assert!(
+                film.pixels.iter().any(|p| p.max_element() > 0.0),
+                "{what}: black"
+            );
+        }
+    };
+    check(&mut world, &mut schedule, 3, "first frames");
+    world.get_mut::<Transform>(knots[1]).unwrap().0.translation = glam::DVec3::new(0.0, 1.0, 0.0);
+    check(&mut world, &mut schedule, 0, "after a move");
+}
