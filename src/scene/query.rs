@@ -761,7 +761,8 @@ impl RenderScene {
                     },
                 );
             } else if lanes != 0 {
-                let mut local = PacketOf::<N>::new(&rays[..n], &[0.0; N][..n], &t_max[..n]);
+                // The group is in the render frame: the packet as it is.
+                let mut local = packet;
                 blocked |= mesh_packet(m, &mut local, lanes);
             }
         }

@@ -181,6 +181,20 @@ pub(crate) fn merged_scene(rng: &mut Rng, with_plane: bool) -> RenderScene {
     scene
 }
 
+/// `2 n` rays: in turn, one from outside (on a sphere of radius 15)
+/// towards a random point of the middle, and one from anywhere inside in
+/// a random direction.
+fn mixed_rays(rng: &mut Rng, n: usize) -> Vec<Ray> {
+    let mut rays = Vec::with_capacity(2 * n);
+    for _ in 0..n {
+        let o = rng.dir() * 15.0;
+        let target = rng.vec(-6.0, 6.0);
+        rays.push(Ray::new(o.into(), (target - o).normalize().into()));
+        rays.push(Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()));
+    }
+    rays
+}
+
 /// What single rays answer for one packet's `rays`: each ray's closest
 /// hit (its `Debug` text, so every bit counts), the ends of segments
 /// along the rays, each at a random fraction (0.3 to 1.7) of the ray's
@@ -260,14 +274,7 @@ fn closest_hits_equal_brute_force_on_random_rays_merged() {
 fn closest_hits_equal_brute_force_on_random_rays_with(make: fn(&mut Rng, bool) -> RenderScene) {
     let mut rng = Rng::new(42);
     let scene = make(&mut rng, true);
-    let mut rays = Vec::new();
-    for _ in 0..4000 {
-        // From outside towards the middle, and from anywhere inside.
-        let o = rng.dir() * 15.0;
-        let target = rng.vec(-6.0, 6.0);
-        rays.push(Ray::new(o.into(), (target - o).normalize().into()));
-        rays.push(Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()));
-    }
+    let rays = mixed_rays(&mut rng, 4000);
     let hits = check_rays(&scene, &rays);
     assert!(hits > 2000, "only {hits} hits: the test would prove little");
 }
@@ -940,13 +947,7 @@ fn merged_meshes_find_the_unmerged_hits() {
     merged.set_mesh_merging(true);
     merged.commit();
     assert_eq!(merged.merged_instances(), MERGEABLE);
-    let mut rays = Vec::new();
-    for _ in 0..3000 {
-        let o = rng.dir() * 15.0;
-        let target = rng.vec(-6.0, 6.0);
-        rays.push(Ray::new(o.into(), (target - o).normalize().into()));
-        rays.push(Ray::new(rng.vec(-7.0, 7.0).into(), rng.dir().into()));
-    }
+    let rays = mixed_rays(&mut rng, 3000);
     let (mut same, mut on_merged) = (0, 0);
     for (i, ray) in rays.iter().enumerate() {
         let a = merged.intersect(ray, 0.0, f32::INFINITY);

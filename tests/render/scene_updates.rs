@@ -538,6 +538,18 @@ fn quality_change_resets_the_scene() {
     let _ = systems::setup;
 }
 
+/// Every pixel of `film` within 1e-4 relative (1e-6 absolute) of
+/// `reference`'s: what the integrators agree to.
+fn assert_films_agree(film: &[Color], reference: &[Color], what: &str) {
+    for (p, r) in film.iter().zip(reference) {
+        let d = (*p - *r).abs().max_element();
+        assert!(
+            d <= 1e-6 || d <= 1e-4 * r.max_element(),
+            "{what}: {p} vs {r}"
+        );
+    }
+}
+
 /// Area lights follow their entities: after moving an emissive square and
 /// then changing its material, the incrementally updated scene renders
 /// (path transport, both integrators) exactly what a scene built from
@@ -600,13 +612,7 @@ fn area_lights_follow_moves_and_material_changes() {
             let camera = q.single(world).unwrap().clone();
             let reference =
                 prism::integrators::recursive::render(&scene, &camera, &settings, None).0;
-            for (p, r) in film.pixels.iter().zip(&reference.pixels) {
-                let d = (*p - *r).abs().max_element();
-                assert!(
-                    d <= 1e-6 || d <= 1e-4 * r.max_element(),
-                    "{what} {kind:?}: {p} vs {r}"
-                );
-            }
+            assert_films_agree(&film.pixels, &reference.pixels, &format!("{what} {kind:?}"));
             assert!(film.pixels.iter().any(|p| p.max_element() > 0.0) || what == "dark");
         }
     };
@@ -681,13 +687,7 @@ fn merged_meshes_follow_the_frame_loop() {
             let camera = q.single(world).unwrap().clone();
             let want =
                 prism::integrators::recursive::render(&reference, &camera, &settings, None).0;
-            for (p, r) in film.pixels.iter().zip(&want.pixels) {
-                let d = (*p - *r).abs().max_element();
-                assert!(
-                    d <= 1e-6 || d <= 1e-4 * r.max_element(),
-                    "{what} {kind:?}: {p} vs {r}"
-                );
-            }
+            assert_films_agree(&film.pixels, &want.pixels, &format!("{what} {kind:?}"));
             assert!(
                 film.pixels.iter().any(|p| p.max_element() > 0.0),
                 "{what}: black"
