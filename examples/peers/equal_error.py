@@ -18,7 +18,10 @@ Monte Carlo error falls as time^-1/2, so each point gives a constant
 c = error * sqrt(time) (printed for every point; the highest-spp point,
 least affected by fixed start-up costs, is used): the time Prism needs to
 reach Mitsuba's error is (c_prism / c_mitsuba)^2 times Mitsuba's. Prints a
-Markdown table.
+Markdown table. With several spp, it also gives, for each of Mitsuba's
+points, the time Prism needs for that error read off its own points
+(log-log interpolation), which does not assume the time^-1/2 law: Prism's
+Sobol sampler converges faster than that, so its c falls with spp.
 
 Make the reference with Mitsuba at 4096 spp and another seed:
   ~/.cache/peers-venv/bin/python ../shared/peers/mitsuba_render.py SCENE.gltf -o REF.exr \
@@ -112,6 +115,39 @@ def main():
             continue
         c = pts[-1][2] * pts[-1][1] ** 0.5
         print("\n%s needs %.2fx Mitsuba's time for Mitsuba's error (at the highest spp)." % (k, (c / cm) ** 2))
+    # The same question at each of Mitsuba's error levels, without assuming
+    # that error falls as time^-1/2 (a low-discrepancy sampler's falls
+    # faster): Prism's time for that error, read off the straight line
+    # through its two neighbouring points in log(error)-log(time).
+    if len(rows["mitsuba"]) > 1 and all(len(v) > 1 for v in rows.values()):
+        print("\n| Mitsuba spp | its error | its seconds | " +
+              " | ".join("%s: seconds for that error (ratio)" % k for k in rows if k != "mitsuba") + " |")
+        print("|---:|---:|---:|" + "---:|" * (len(rows) - 1))
+        for spp, t_m, e_m in rows["mitsuba"]:
+            cells = []
+            for k, pts in rows.items():
+                if k == "mitsuba":
+                    continue
+                t, outside = time_for_error(pts, e_m)
+                cells.append("%.3f (%.2fx)%s" % (t, t / t_m, " extrapolated" if outside else ""))
+            print("| %d | %.5f | %.3f | %s |" % (spp, e_m, t_m, " | ".join(cells)))
+
+
+def time_for_error(pts, e):
+    """Time at which the renderer whose (spp, seconds, error) points are
+    `pts` (by increasing spp) reaches error `e`: linear in log-log between
+    the two points around `e` (or along the nearest end segment, then
+    flagged as extrapolated)."""
+    import math
+    outside = not (pts[-1][2] <= e <= pts[0][2])
+    for i in range(len(pts) - 1):
+        if pts[i + 1][2] <= e or i == len(pts) - 2:
+            break
+    if e > pts[0][2]:
+        i = 0
+    (_, t0, e0), (_, t1, e1) = pts[i], pts[i + 1]
+    slope = math.log(t1 / t0) / math.log(e1 / e0)
+    return t0 * math.exp(slope * math.log(e / e0)), outside
 
 
 if __name__ == "__main__":
