@@ -28,6 +28,7 @@ Make the reference with Mitsuba at 4096 spp and another seed:
       --width 320 --height 240 --spp 4096 --max-depth 18 --seed 1
 """
 import argparse
+import math
 import os
 import re
 import statistics
@@ -138,13 +139,9 @@ def time_for_error(pts, e):
     `pts` (by increasing spp) reaches error `e`: linear in log-log between
     the two points around `e` (or along the nearest end segment, then
     flagged as extrapolated)."""
-    import math
     outside = not (pts[-1][2] <= e <= pts[0][2])
-    for i in range(len(pts) - 1):
-        if pts[i + 1][2] <= e or i == len(pts) - 2:
-            break
-    if e > pts[0][2]:
-        i = 0
+    # The first segment whose far end is at or below `e`, else the last.
+    i = next((i for i in range(len(pts) - 2) if pts[i + 1][2] <= e), len(pts) - 2)
     (_, t0, e0), (_, t1, e1) = pts[i], pts[i + 1]
     slope = math.log(t1 / t0) / math.log(e1 / e0)
     return t0 * math.exp(slope * math.log(e / e0)), outside
