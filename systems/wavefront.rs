@@ -676,6 +676,11 @@ its photon pass is already one parallel light-side pass, and its camera side (a 
 that reads the photon maps at diffuse surfaces, with optional final gathering) has no stage in the \
 wavefront's material-class queues yet";
 
+/// The error of a path-traced frame with caustic connections asked of the
+/// wavefront integrator.
+pub const CAUSTICS_ON_WAVEFRONT: &str = "caustic connections (--caustics) run on the recursive integrator \
+(--integrator recursive): the wavefront has no stage for their light subpaths yet";
+
 /// Renders one frame with the wavefront integrator: runs the batch and
 /// bounce schedules until every path is finished, then writes [`Frame`].
 pub fn render_wavefront(world: &mut World) {
@@ -686,6 +691,10 @@ pub fn render_wavefront(world: &mut World) {
     let settings = &config.settings;
     if settings.transport == crate::core::settings::Transport::Photon {
         world.resource_mut::<Frame>().error = Some(PHOTON_ON_WAVEFRONT.into());
+        return;
+    }
+    if settings.transport == crate::core::settings::Transport::Path && settings.caustics {
+        world.resource_mut::<Frame>().error = Some(CAUSTICS_ON_WAVEFRONT.into());
         return;
     }
     let classes: Vec<MaterialClass> = scene.materials().iter().map(|m| m.class()).collect();

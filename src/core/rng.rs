@@ -247,6 +247,23 @@ impl Sampler {
         SamplerSeed::new(kind, seed, pixel, sample).sampler()
     }
 
+    /// Another sampler for the same pixel sample, keyed by `salt`: its
+    /// numbers are a pure function of (kind, seed, pixel, sample, salt,
+    /// dimension), independent of this one's, and the Sobol sampler's
+    /// still stratify across the pixel's samples.
+    #[inline]
+    pub fn fork(&self, salt: u64) -> Sampler {
+        Sampler {
+            key: mix64(self.key ^ salt),
+            pixel_key: mix64(self.pixel_key ^ salt),
+            sample: self.sample,
+            dimension: 0,
+            sobol: self.sobol,
+            cached_set: u32::MAX,
+            cached: [0.0; 4],
+        }
+    }
+
     /// Jumps to dimension `d` (integrators give each bounce a fixed
     /// range, aligned to sets of four).
     #[inline]

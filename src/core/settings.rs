@@ -55,6 +55,11 @@ pub struct RenderSettings {
     /// A panoramic camera instead of the perspective one (`None`): every
     /// direction around the eye, see [`Panorama`].
     pub panorama: Option<Panorama>,
+    /// Path transport: light tracing of the caustics seen directly
+    /// (`E D S+ L`), which it takes over from path tracing; see
+    /// [`crate::transport::caustic`]. The recursive integrator only, on a
+    /// pinhole perspective camera, without a render window.
+    pub caustics: bool,
 }
 
 /// A panoramic camera projection: the image holds every direction around
@@ -386,6 +391,7 @@ impl Default for RenderSettings {
             radiosity: Default::default(),
             panorama: None,
             photon: Default::default(),
+            caustics: false,
         }
     }
 }
@@ -445,6 +451,12 @@ impl RenderSettings {
         }
         if self.spp == 0 {
             return Err("samples per pixel must be at least 1".into());
+        }
+        if self.caustics && self.window.is_some() {
+            return Err(
+                "caustic light tracing splats onto the whole image: it takes no render window or shard"
+                    .into(),
+            );
         }
         if !(self.min_contribution >= 0.0 && self.min_contribution.is_finite()) {
             return Err(format!(

@@ -4,6 +4,7 @@
 /// The ray and sample counters, kept in `core` so transport kernels can fill
 /// them; re-exported here where integrators and their callers name them.
 pub use crate::core::counters;
+pub mod caustics;
 pub mod lines;
 pub mod overlay;
 pub mod photon;

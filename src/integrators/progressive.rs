@@ -96,6 +96,7 @@ impl Accumulator {
                             &cam,
                             (x as u32, y as u32),
                             (s, total),
+                            false,
                             &mut counters,
                         );
                         accumulate(sum, l, &mut counters);

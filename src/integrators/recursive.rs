@@ -15,6 +15,7 @@ use crate::integrators::counters::RenderCounters;
 use crate::scene::camera::{Camera, CameraRays};
 use crate::scene::query::COHERENT_LANES;
 use crate::scene::{Hit, RenderScene};
+use crate::transport::caustic::{self, ChainState};
 use crate::transport::gooch::gooch_shade;
 use crate::transport::interaction::{Interaction, RayKind};
 use crate::transport::medium::interior_transmittance;
@@ -245,8 +246,34 @@ pub fn trace_path(
     sampler: &mut Sampler,
     counters: &mut RenderCounters,
 ) -> Color {
+    trace_path_with(scene, settings, camera_ray, cone, sampler, false, counters)
+}
+
+/// [`trace_path`], leaving to light tracing the caustics it takes when
+/// `caustics` (see [`crate::transport::caustic`]; the caller checks
+/// [`caustic::applicable`] and adds light tracing's splats).
+pub fn trace_path_with(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    camera_ray: &Ray,
+    cone: RayCone,
+    sampler: &mut Sampler,
+    caustics: bool,
+    counters: &mut RenderCounters,
+) -> Color {
     let lambda = path::path_wavelength(scene, settings, sampler);
-    let l = trace_path_at(scene, settings, camera_ray, cone, sampler, lambda, counters);
+    let caustics = caustics && lambda.is_none();
+    let l = if scene.has_media() {
+        trace_path_in::<true>(
+            scene, settings, camera_ray, cone, sampler, lambda, false, counters,
+        )
+    } else if caustics {
+        trace_path_in::<false>(
+            scene, settings, camera_ray, cone, sampler, lambda, true, counters,
+        )
+    } else {
+        trace_path_at(scene, settings, camera_ray, cone, sampler, lambda, counters)
+    };
     path::weigh_wavelength(l, lambda)
 }
 
@@ -263,15 +290,22 @@ fn trace_path_at(
     counters: &mut RenderCounters,
 ) -> Color {
     if scene.has_media() {
-        trace_path_in::<true>(scene, settings, camera_ray, cone, sampler, lambda, counters)
+        trace_path_in::<true>(
+            scene, settings, camera_ray, cone, sampler, lambda, false, counters,
+        )
     } else {
-        trace_path_in::<false>(scene, settings, camera_ray, cone, sampler, lambda, counters)
+        trace_path_in::<false>(
+            scene, settings, camera_ray, cone, sampler, lambda, false, counters,
+        )
     }
 }
 
 /// The path loop; `MEDIA` follows each segment through the scene's media
 /// ([`volume::propagate`]) and gives shadow rays their transmittance.
+/// With `caustics` (never with `MEDIA`) the paths light tracing takes are
+/// skipped ([`ChainState`]).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn trace_path_in<const MEDIA: bool>(
     scene: &RenderScene,
     settings: &RenderSettings,
@@ -279,8 +313,11 @@ fn trace_path_in<const MEDIA: bool>(
     cone: RayCone,
     sampler: &mut Sampler,
     lambda: Option<f32>,
+    caustics: bool,
     counters: &mut RenderCounters,
 ) -> Color {
+    let caustics = caustics && !MEDIA;
+    let mut chain = ChainState::default();
     let mut radiance = Color::ZERO;
     let mut throughput = Color::ONE;
     let mut ray = *camera_ray;
@@ -340,8 +377,13 @@ fn trace_path_in<const MEDIA: bool>(
         if !MEDIA && let Some(tr) = interior_transmittance(&it, distance) {
             throughput *= tr;
         }
-        radiance +=
-            throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        if caustics {
+            chain.enter(&it.surface, depth);
+        }
+        if !(caustics && chain.skip_emission()) {
+            radiance +=
+                throughput * path::emitted(scene, settings, &it, hit.instance, prev_pdf, distance);
+        }
         // Subsurface materials have scattering interiors: only scenes with
         // media have them.
         let crossing = if MEDIA {
@@ -351,7 +393,8 @@ fn trace_path_in<const MEDIA: bool>(
         };
         let lobes = LobeChoice::new(&it);
         if crossing != Some(volume::Crossing::Into) {
-            path::next_event(scene, settings, &it, &lobes, sampler, depth, |q| {
+            let area = !(caustics && chain.skip_area_lights(depth, settings));
+            path::next_event_with(scene, settings, &it, &lobes, sampler, depth, area, |q| {
                 counters.rays.shadow += 1;
                 if through_media {
                     let tr = volume::shadow_transmittance(scene, &q.ray, q.t_max);
@@ -364,6 +407,9 @@ fn trace_path_in<const MEDIA: bool>(
         let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
             return radiance;
         };
+        if caustics {
+            chain.leave(&it.surface, depth, c.sample.pdf);
+        }
         match c.sample.kind {
             RayKind::Reflection => counters.rays.reflection += 1,
             RayKind::Refraction => counters.rays.refraction += 1,
@@ -387,12 +433,14 @@ fn trace_path_in<const MEDIA: bool>(
 /// as a call it costs about 50 instructions per sample on the cheapest
 /// scenes (callgrind), which is 3-4% of a Whitted camera ray.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub fn pixel_sample(
     scene: &RenderScene,
     settings: &RenderSettings,
     cam: &CameraRays,
     (x, y): (u32, u32),
     (s, spp): (u32, u32),
+    caustics: bool,
     counters: &mut RenderCounters,
 ) -> Color {
     let pixel = y * settings.width + x;
@@ -403,9 +451,15 @@ pub fn pixel_sample(
         Transport::Whitted => trace(scene, settings, &ray, cam.cone(), 0, Color::ONE, counters),
         // A lone sample has no photon maps: photon transport renders through
         // `integrators::photon`; here it falls back to path tracing.
-        Transport::Path | Transport::Photon => {
-            trace_path(scene, settings, &ray, cam.cone(), &mut sampler, counters)
-        }
+        Transport::Path | Transport::Photon => trace_path_with(
+            scene,
+            settings,
+            &ray,
+            cam.cone(),
+            &mut sampler,
+            caustics,
+            counters,
+        ),
         // Radiosity frames need their solution and are rendered by
         // `integrators::radiosity`; without one, surfaces show as Whitted
         // transport sees them.
@@ -421,11 +475,20 @@ fn pixel_sum(
     cam: &CameraRays,
     (x, y): (u32, u32),
     samples: std::ops::Range<u32>,
+    caustics: bool,
     counters: &mut RenderCounters,
 ) -> PixelSum {
     let mut sum = PixelSum::default();
     for s in samples {
-        let l = pixel_sample(scene, settings, cam, (x, y), (s, settings.spp), counters);
+        let l = pixel_sample(
+            scene,
+            settings,
+            cam,
+            (x, y),
+            (s, settings.spp),
+            caustics,
+            counters,
+        );
         accumulate(&mut sum, l, counters);
     }
     sum
@@ -499,6 +562,7 @@ fn render_rows<T: Send>(
         settings.transport,
         Transport::Whitted | Transport::Radiosity
     );
+    let caustics = caustic::applicable(scene, settings, &cam);
     out.par_chunks_mut(map.columns() as usize)
         .zip(map.rows().par_iter())
         .with_max_len(1)
@@ -533,6 +597,7 @@ fn render_rows<T: Send>(
                     &cam,
                     (x, y),
                     window.samples.clone(),
+                    caustics,
                     &mut counters,
                 );
                 *px = f(sum);
@@ -562,9 +627,14 @@ pub fn render(
         window.columns.end - window.columns.start,
         window.row_count(),
     );
-    let counters = render_rows(scene, camera, settings, progress, &mut film.pixels, |s| {
+    let mut counters = render_rows(scene, camera, settings, progress, &mut film.pixels, |s| {
         s.mean()
     });
+    let cam = camera_rays(scene, camera, settings);
+    if caustic::applicable(scene, settings, &cam) {
+        let c = super::caustics::add_splats(scene, settings, &cam, &mut film);
+        counters.add(&c);
+    }
     (film, counters)
 }
 
@@ -721,7 +791,7 @@ mod tests {
             let mut alone = RenderCounters::default();
             for y in 0..settings.height {
                 for x in 0..settings.width {
-                    let sum = pixel_sum(&scene, &settings, &cam, (x, y), 0..spp, &mut alone);
+                    let sum = pixel_sum(&scene, &settings, &cam, (x, y), 0..spp, false, &mut alone);
                     let (p, q) = (film.pixels[(y * settings.width + x) as usize], sum.mean());
                     assert_eq!(
                         p.to_array().map(f32::to_bits),

@@ -91,6 +91,8 @@ pub struct SettingsDesc {
     pub lightfield: Option<crate::core::settings::LightFieldSettings>,
     /// Photon mapping's parameters, each optional.
     pub photon: crate::core::photon_settings::PhotonOverrides,
+    /// Light tracing of directly seen caustics.
+    pub caustics: Option<bool>,
 }
 
 impl SettingsDesc {
@@ -125,6 +127,7 @@ impl SettingsDesc {
             radiosity: self.radiosity.resolve(&under.radiosity),
             panorama: self.panorama.or(under.panorama).unwrap_or(d.panorama),
             photon: self.photon.or(under.photon).resolve(),
+            caustics: self.caustics.or(under.caustics).unwrap_or(d.caustics),
         }
     }
 }

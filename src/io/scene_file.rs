@@ -749,6 +749,7 @@ impl Ctx<'_> {
             .map_err(|e| self.err(format!("settings.photon: {e}")))?;
         Ok(SettingsDesc {
             photon,
+            caustics: None,
             width: s.width,
             height: s.height,
             spp: s.spp,

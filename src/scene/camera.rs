@@ -371,6 +371,22 @@ impl CameraRays {
         self.origin
     }
 
+    /// True for a pinhole perspective camera (no lens, no panorama, not
+    /// orthographic): every ray starts at one eye.
+    pub fn pinhole_perspective(&self) -> bool {
+        !self.has_lens() && self.panorama.is_none() && self.ortho_forward.is_none()
+    }
+
+    /// The unit viewing direction, normal to the image plane.
+    pub fn forward(&self) -> Vec3A {
+        self.forward
+    }
+
+    /// Area of one pixel on the image plane at distance 1 from the eye.
+    pub fn pixel_area(&self) -> f32 {
+        self.dx.length() * self.dy.length()
+    }
+
     /// The inverse of [`CameraRays::ray`]: prepares the projection of
     /// world points onto the film.
     pub fn projection(&self) -> CameraProjection {

@@ -3,6 +3,7 @@
 //! scattering, and path tracing's BSDF sampling, next-event estimation and
 //! roulette.
 
+pub mod caustic;
 pub mod gooch;
 pub mod interaction;
 pub mod medium;

@@ -310,6 +310,25 @@ pub fn next_event(
     lobes: &LobeChoice,
     sampler: &mut Sampler,
     depth: u32,
+    emit: impl FnMut(ShadowQuery),
+) {
+    next_event_with(scene, settings, it, lobes, sampler, depth, true, emit);
+}
+
+/// [`next_event`], with the area lights' samples drawn but dropped unless
+/// `area` (at a vertex whose paths to area emitters caustic connections
+/// take, see [`crate::transport::caustic`]): the other lights and the
+/// sampler's dimensions are unchanged.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn next_event_with(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    it: &Interaction,
+    lobes: &LobeChoice,
+    sampler: &mut Sampler,
+    depth: u32,
+    area: bool,
     mut emit: impl FnMut(ShadowQuery),
 ) {
     let first = bounce_dimension(settings, depth);
@@ -337,6 +356,9 @@ pub fn next_event(
         if scene.emitters().is_empty() {
             return;
         }
+        if !area {
+            return;
+        }
         for i in 0..n {
             let (v, u) = numbers(i);
             if let Some(q) = area_light_sample(scene, settings, it, lobes, (u, v), 1.0, depth) {
@@ -353,6 +375,8 @@ pub fn next_event(
         let (v, u) = numbers(i);
         let q = if u < p_env {
             environment_sample(settings, it, lobes, env, p_env, v, depth)
+        } else if !area {
+            None
         } else {
             let u = ((u - p_env) / (1.0 - p_env)).min(1.0 - f32::EPSILON / 2.0);
             area_light_sample(scene, settings, it, lobes, (u, v), 1.0 - p_env, depth)

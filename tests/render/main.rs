@@ -48,6 +48,7 @@
 mod common;
 
 mod analytic;
+mod caustics;
 mod dispersion;
 mod environment;
 mod illustration;

@@ -219,6 +219,15 @@ pub struct RenderArgs {
     /// way; roulette trades variance for speed).
     #[arg(long, conflicts_with = "rr_depth")]
     no_russian_roulette: bool,
+    /// Path tracing, recursive integrator: light tracing for caustics.
+    /// Each camera sample also sends one path from the area lights; where
+    /// it reaches a diffuse surface through mirrors or glass, that point
+    /// is connected to the eye and added to the pixel it projects to. This
+    /// takes over from path tracing the caustics seen directly, which it
+    /// finds only by chance (unbiased either way). Pinhole perspective
+    /// cameras, whole images.
+    #[arg(long)]
+    caustics: bool,
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
@@ -595,6 +604,7 @@ fn render_with_pool(
         radiosity: args.radiosity.desc(),
         panorama: args.projection.get(),
         photon: args.photon.overrides(),
+        caustics: args.caustics.then_some(true),
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {

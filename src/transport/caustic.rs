@@ -1,0 +1,364 @@
+//! Light tracing of caustics: an estimator of the caustics seen directly
+//! by the camera, which path tracing samples worst.
+//!
+//! A path tracer finds light that reached a diffuse surface through a
+//! specular chain (`L S+ D`) only when a BSDF sample happens to leave the
+//! diffuse surface towards the chain and the chain happens to end on an
+//! emitter: rare, bright samples, the speckle over the walls and floor of
+//! `assets/gltf/spheres.gltf` that dominates its error long after the
+//! rest has converged. A *light subpath* goes the other way: it leaves an
+//! emitter (a point by the emitters' own distribution, a
+//! cosine-distributed direction on either side), follows specular-like
+//! surfaces ([`specular_like`]) and stops at the first other surface, the
+//! *caustic vertex* `D`, which is then connected to the eye and added to
+//! the pixel it projects to ([`splat`]).
+//!
+//! The two estimators share the path space without overlap, so no
+//! weights are needed: light tracing takes exactly the paths
+//! `E D S+ L` in which `D` is the camera ray's hit, a non-specular-like
+//! surface that the camera path leaves through a non-specular lobe, every
+//! `S` is a specular-like surface and `L` an area emitter; path tracing
+//! skips exactly those ([`ChainState`]): the emission its BSDF samples
+//! find at the end of such a chain, and the area-light samples of
+//! next-event estimation from the chain's vertices. Every other path
+//! (caustics seen through a mirror or after another diffuse bounce,
+//! punctual lights, the environment) stays with path tracing.
+//!
+//! A light subpath's weight `beta` is the emitted radiance over the
+//! density of its point and direction, times each chain vertex's BSDF
+//! weight with the adjoint shading-normal factor
+//! `|w_o.n_s| |w_i.n_g| / (|w_o.n_g| |w_i.n_s|)` (Veach 1997, 5.3.2).
+//! With `w` the direction from `D` to the eye at distance `r`, `w_l` the
+//! direction back along the chain and `cos_e` the cosine between `w` and
+//! the viewing direction, the pixel under `D` receives
+//! `beta f_D(w, w_l) |n_s.w_l| / |n_g.w_l| |n_g.w| / (r^2 cos_e^3 A)`
+//! (`A` the area of one pixel on the image plane at distance 1) divided by
+//! the number of light subpaths: the change of variables from the film
+//! position of a camera ray to the point `D` it hits.
+
+use std::f32::consts::PI;
+
+use glam::Vec2;
+
+use crate::core::math::{Color, Ray, max_component};
+use crate::core::optics::{OFFSET_ULPS, offset_origin_scaled};
+use crate::core::rng::Sampler;
+use crate::core::sampling::cosine_hemisphere;
+use crate::core::settings::RenderSettings;
+use crate::scene::RenderScene;
+use crate::scene::camera::{CameraProjection, CameraRays};
+use crate::scene::material::SurfaceSample;
+use crate::transport::interaction::{Interaction, ShadowQuery, brdf_cos};
+use crate::transport::medium::interior_transmittance;
+use crate::transport::path::{LobeChoice, bsdf_cos, sample_bsdf};
+
+/// GGX `alpha` below which a glTF surface's specular layer counts as
+/// specular-like (roughness about 0.1): a lobe that narrow sends next-event
+/// estimation's shadow rays nowhere useful, so path tracing finds light
+/// through it only by its BSDF samples, as through a mirror.
+pub const SPECULAR_ALPHA: f32 = 0.01;
+
+/// Salt of the light subpath's sampler ([`Sampler::fork`]).
+const LIGHT_SUBPATH_SALT: u64 = 0xc4a5_71c0_11ec_7100;
+
+/// Whether the surface `s` is specular-like: it scatters only through
+/// perfect mirrors, smooth glass or glTF specular layers narrower than
+/// [`SPECULAR_ALPHA`] (no Lambertian part, no Blinn-Phong highlight), and
+/// scatters at all. Depends on the surface only, never on directions, so
+/// that the light subpath and path tracing classify a vertex alike.
+#[inline]
+pub fn specular_like(s: &SurfaceSample) -> bool {
+    match &s.gltf {
+        Some(g) => {
+            let layer = g.metallic > 0.0 || g.dielectric_weight > 0.0;
+            g.diffuse == Color::ZERO
+                && (!layer || g.alpha < SPECULAR_ALPHA)
+                && (layer || s.transmission > 0.0)
+        }
+        None => {
+            s.diffuse == Color::ZERO
+                && s.specular == Color::ZERO
+                && (s.mirror != Color::ZERO || s.transmission > 0.0)
+        }
+    }
+}
+
+/// The end of a light subpath: where light arrived through a specular
+/// chain.
+#[derive(Clone, Copy, Debug)]
+pub struct CausticVertex {
+    /// The surface reached; its `wo` points back along the chain.
+    pub it: Interaction,
+    /// The subpath's weight (see the module documentation).
+    pub beta: Color,
+    /// Specular-like bounces between the emitter and [`Self::it`].
+    pub chain: u32,
+}
+
+/// Traces one light subpath with `sampler` (a sampler of its own, see
+/// [`light_sampler`]): `None` when its first hit is not specular-like,
+/// when it leaves the scene, or when its chain would make paths longer
+/// than the settings' depth allows. The second value counts the rays
+/// traced.
+pub fn light_subpath(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    sampler: &mut Sampler,
+) -> (Option<CausticVertex>, u32) {
+    let mut rays = 0;
+    let [u, vx, vy, u_side] = sampler.set_of_four(0);
+    let Some(ls) =
+        scene
+            .emitters()
+            .sample(scene.instances(), scene.materials(), u, Vec2::new(vx, vy))
+    else {
+        return (None, rays);
+    };
+    if !(ls.pdf_area > 0.0) || ls.radiance == Color::ZERO {
+        return (None, rays);
+    }
+    // Either side emits: one chosen with probability 1/2, then a cosine
+    // distributed direction around it, so `Le cos / (pdf_area / 2 cos /
+    // pi)`.
+    let n = if u_side < 0.5 { ls.normal } else { -ls.normal };
+    let [a, b, _, _] = sampler.set_of_four(4);
+    let dir = cosine_hemisphere(n, Vec2::new(a, b));
+    if !(n.dot(dir) > 0.0) {
+        return (None, rays);
+    }
+    let mut beta = ls.radiance * (2.0 * PI / ls.pdf_area);
+    let mut ray = Ray::new(
+        offset_origin_scaled(ls.point, n, ls.point.abs().max_element()),
+        dir,
+    );
+    // The emitter of a path `E D S^k L` is at bounce `k + 1`, and path
+    // tracing finds emitters by BSDF samples up to bounce `max_depth`:
+    // `k` at most `max_depth - 1`.
+    let max_chain = settings.max_depth.saturating_sub(1);
+    let mut chain = 0u32;
+    loop {
+        rays += 1;
+        let Some(hit) = scene.intersect(&ray, 0.0, f32::INFINITY) else {
+            return (None, rays);
+        };
+        let it = Interaction::new(scene, &ray, &hit);
+        if let Some(tr) = interior_transmittance(&it, hit.t * ray.direction.length()) {
+            beta *= tr;
+        }
+        if !specular_like(&it.surface) {
+            if chain == 0 {
+                return (None, rays);
+            }
+            return (Some(CausticVertex { it, beta, chain }), rays);
+        }
+        if chain >= max_chain {
+            return (None, rays);
+        }
+        let lobes = LobeChoice::new(&it);
+        let [ux, uy, u_lobe, _] = sampler.set_of_four(8 + 4 * chain);
+        let Some(s) = sample_bsdf(&it, &lobes, u_lobe, Vec2::new(ux, uy)) else {
+            return (None, rays);
+        };
+        let wi = s.ray.direction;
+        let num = it.wo.dot(it.ns).abs() * wi.dot(it.ng).abs();
+        let den = it.wo.dot(it.ng).abs() * wi.dot(it.ns).abs();
+        if !(den > 0.0) {
+            return (None, rays);
+        }
+        beta = beta * s.weight * (num / den);
+        if !(max_component(beta) > 0.0) || !beta.is_finite() {
+            return (None, rays);
+        }
+        chain += 1;
+        ray = s.ray;
+    }
+}
+
+/// The sampler of light subpath `n` of a frame of `pixels` pixels: its
+/// numbers are a pure function of (seed, `n`, dimension). Subpath `n`
+/// takes the keys of sample `n / pixels` of pixel `n % pixels`, forked
+/// ([`Sampler::fork`]), so the Sobol sampler stratifies them as it does
+/// a pixel's samples.
+#[inline]
+pub fn light_sampler(settings: &RenderSettings, pixels: u64, n: u64) -> Sampler {
+    let pixel = (n % pixels) as u32;
+    let sample = (n / pixels) as u32;
+    Sampler::with_kind(settings.sampler, settings.seed, pixel, sample).fork(LIGHT_SUBPATH_SALT)
+}
+
+/// Whether light tracing of caustics runs for this frame: asked for,
+/// path transport in RGB without participating media, area emitters, a
+/// specular-like material (at texture coordinates (0, 0): without one no
+/// light subpath could reach a caustic vertex), a pinhole perspective
+/// camera (`cam`) and no render window. Otherwise path tracing keeps every
+/// path and nothing of light tracing runs.
+pub fn applicable(scene: &RenderScene, settings: &RenderSettings, cam: &CameraRays) -> bool {
+    settings.caustics
+        && settings.transport == crate::core::settings::Transport::Path
+        && settings.window.is_none()
+        && !scene.has_media()
+        && !scene.is_spectral()
+        && !scene.emitters().is_empty()
+        && settings.max_depth >= 1
+        && cam.pinhole_perspective()
+        && (0..scene.materials().len() as u32)
+            .any(|m| specular_like(&scene.surface(m, Vec2::ZERO, 0.0)))
+}
+
+/// The BSDF times cosine of `it`'s non-specular lobes towards `wi` (what
+/// next-event estimation evaluates).
+#[inline]
+fn smooth_f(it: &Interaction, wi: glam::Vec3A) -> Color {
+    if it.surface.gltf.is_some() {
+        bsdf_cos(it, wi)
+    } else {
+        brdf_cos(&it.surface, it.ns, it.wo, wi)
+    }
+}
+
+/// Film positions per unit area of a surface at `point` with normal `n`
+/// seen by the pinhole camera `cam`: `|n.w| / (r^2 cos_e^3 A)` for the
+/// direction `w` from the point to the eye at distance `r`, `cos_e` its
+/// cosine with the viewing direction and `A` the area of one pixel on the
+/// image plane at distance 1 (film positions counted in pixels). `None`
+/// behind the eye.
+#[inline]
+pub fn film_density(cam: &CameraRays, point: glam::Vec3A, n: glam::Vec3A) -> Option<f32> {
+    let to = cam.origin() - point;
+    let d2 = to.length_squared();
+    if !(d2 > 0.0 && d2.is_finite()) {
+        return None;
+    }
+    let w = to / d2.sqrt();
+    let cos_e = cam.forward().dot(-w);
+    if !(cos_e > 0.0) {
+        return None;
+    }
+    Some(n.dot(w).abs() / (d2 * cos_e * cos_e * cos_e * cam.pixel_area()))
+}
+
+/// The eye's view of caustic vertex `v`: the pixel (row-major index) it
+/// projects to, a shadow ray to the eye, and the radiance it adds to that
+/// pixel per light subpath if the ray is unblocked (see the module
+/// documentation); `None` outside the image or when it carries nothing.
+#[inline]
+pub fn splat(
+    settings: &RenderSettings,
+    cam: &CameraRays,
+    proj: &CameraProjection,
+    v: &CausticVertex,
+) -> Option<(u32, ShadowQuery)> {
+    let eye = cam.origin();
+    let to = eye - v.it.point;
+    let d2 = to.length_squared();
+    if !(d2 > 0.0 && d2.is_finite()) {
+        return None;
+    }
+    let (film, depth) = proj.project(v.it.point);
+    if !(depth > 0.0) {
+        return None;
+    }
+    let (w_px, h_px) = (settings.width as f32, settings.height as f32);
+    if !(film.x >= 0.0 && film.x < w_px && film.y >= 0.0 && film.y < h_px) {
+        return None;
+    }
+    let pixel = film.y as u32 * settings.width + film.x as u32;
+    let dist = d2.sqrt();
+    let w = to / dist;
+    // `D` seen from the eye: its BSDF with `wo` towards the eye, the
+    // light arriving from `v.it.wo`, both on one side.
+    let mut d = v.it;
+    let wl = v.it.wo;
+    d.wo = w;
+    if d.ng.dot(w) < 0.0 {
+        d.ng = -d.ng;
+        d.ns = -d.ns;
+        d.front_face = !d.front_face;
+    }
+    let cos_gl = d.ng.dot(wl);
+    if cos_gl <= 0.0 {
+        return None;
+    }
+    let f = smooth_f(&d, wl);
+    if f == Color::ZERO {
+        return None;
+    }
+    let radiance = f * v.beta * (film_density(cam, d.point, d.ng)? / cos_gl);
+    if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
+        return None;
+    }
+    let origin = d.offset(d.ng);
+    let t_end = (eye - origin).dot(w);
+    let scale = eye
+        .abs()
+        .max_element()
+        .max(origin.abs().max_element())
+        .max(t_end);
+    let t_max = t_end - OFFSET_ULPS * f32::EPSILON * scale;
+    if !(t_max > 0.0) {
+        return None;
+    }
+    Some((
+        pixel,
+        ShadowQuery {
+            ray: Ray::new(origin, w),
+            t_max,
+            radiance,
+        },
+    ))
+}
+
+/// What path tracing needs to know, vertex by vertex, to skip the paths
+/// that light tracing takes (see the module documentation).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ChainState {
+    /// The camera ray's hit is non-specular-like and was left through a
+    /// non-specular lobe.
+    first_smooth: bool,
+    /// The current vertex is specular-like and every vertex between it
+    /// and such a first hit is too.
+    in_chain: bool,
+    /// The previous vertex was (the emission found by its BSDF sample is
+    /// light tracing's).
+    came_from_chain: bool,
+}
+
+impl ChainState {
+    /// Enters the vertex of surface `s` at bounce `depth` (call before
+    /// its emission and next-event estimation).
+    #[inline]
+    pub fn enter(&mut self, s: &SurfaceSample, depth: u32) {
+        self.came_from_chain = self.in_chain;
+        self.in_chain = depth >= 1
+            && specular_like(s)
+            && if depth == 1 {
+                self.first_smooth
+            } else {
+                self.in_chain
+            };
+    }
+
+    /// Leaves the vertex of surface `s` at bounce `depth` through a
+    /// sample of density `pdf` (zero for a specular lobe).
+    #[inline]
+    pub fn leave(&mut self, s: &SurfaceSample, depth: u32, pdf: f32) {
+        if depth == 0 {
+            self.first_smooth = pdf > 0.0 && !specular_like(s);
+        }
+    }
+
+    /// Whether the emission found at the current vertex is light
+    /// tracing's.
+    #[inline]
+    pub fn skip_emission(&self) -> bool {
+        self.came_from_chain
+    }
+
+    /// Whether the area-light samples of next-event estimation at the
+    /// current vertex, at bounce `depth`, are light tracing's (it takes
+    /// emitters up to bounce `max_depth`).
+    #[inline]
+    pub fn skip_area_lights(&self, depth: u32, settings: &RenderSettings) -> bool {
+        self.in_chain && depth < settings.max_depth
+    }
+}

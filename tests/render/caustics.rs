@@ -1,0 +1,167 @@
+//! Light tracing of caustics (`--caustics`): the same image in
+//! expectation as path tracing alone, bit for bit across thread counts,
+//! and refused where it cannot run.
+
+use std::path::PathBuf;
+
+use prism::core::settings::{RenderSettings, Transport};
+use prism::image::film::Film;
+use prism::integrators::IntegratorKind;
+
+use crate::common::images::film_bits;
+use crate::common::render::{config, render_file, renderer};
+use crate::common::scenes;
+
+fn spheres() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/gltf/spheres.gltf")
+}
+
+fn settings(spp: u32, caustics: bool) -> RenderSettings {
+    RenderSettings {
+        width: 64,
+        height: 48,
+        spp,
+        max_depth: 16,
+        seed: 1,
+        transport: Transport::Path,
+        caustics,
+        ..Default::default()
+    }
+}
+
+/// Mean over the rows `rows` of every channel.
+fn mean_rows(f: &Film, rows: std::ops::Range<u32>) -> f64 {
+    let mut s = 0.0;
+    for y in rows.clone() {
+        for x in 0..f.width {
+            let c = f.get(x, y);
+            s += (c.x + c.y + c.z) as f64;
+        }
+    }
+    s / (3 * f.width * (rows.end - rows.start)) as f64
+}
+
+/// The glass-and-mirror scene's caustics (5% of its mean, most of it on
+/// the floor and the wall) come out the same by light tracing as by path
+/// tracing: the image's mean and its lower half's agree.
+///
+/// Tolerance: at 64 x 48 and 64 spp four seeds gave image means with a
+/// relative standard deviation of 0.34% without light tracing and 0.29%
+/// with it (release build of `prism render`); at 256 spp that is about
+/// 0.17%, so the difference of the two has a deviation of about 0.23%.
+/// 1% is four of those. Counting the splats twice moves the mean by
+/// about 5% (tried: this test failed).
+#[test]
+fn light_tracing_agrees_with_path_tracing() {
+    let frame = |caustics| {
+        render_file(
+            &spheres(),
+            config(settings(256, caustics), IntegratorKind::Recursive),
+        )
+        .film
+        .unwrap()
+    };
+    let (pt, lt) = (frame(false), frame(true));
+    for rows in [0..48, 24..48] {
+        let (a, b) = (mean_rows(&pt, rows.clone()), mean_rows(&lt, rows.clone()));
+        assert!(a > 0.05, "{a}");
+        assert!(
+            (b / a - 1.0).abs() < 0.01,
+            "rows {rows:?}: path tracing {a}, with light tracing {b}"
+        );
+    }
+}
+
+/// The light subpaths run in chunks on the worker threads: one thread and
+/// two give the same bits.
+#[test]
+fn light_tracing_is_bit_identical_across_thread_counts() {
+    let films: Vec<Film> = [1, 2]
+        .into_iter()
+        .map(|threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    render_file(
+                        &spheres(),
+                        config(settings(8, true), IntegratorKind::Recursive),
+                    )
+                    .film
+                    .unwrap()
+                })
+        })
+        .collect();
+    assert_eq!(film_bits(&films[0]), film_bits(&films[1]));
+}
+
+/// The wavefront integrator refuses light tracing with a message that
+/// names the way out, and a render window is refused by the settings.
+#[test]
+fn light_tracing_is_refused_where_it_cannot_run() {
+    let mut r = renderer(
+        scenes::load(&spheres()),
+        config(settings(1, true), IntegratorKind::Wavefront),
+    );
+    let Err(e) = r.render() else {
+        panic!("the wavefront rendered light tracing");
+    };
+    let e = e.to_string();
+    assert!(e.contains("--integrator recursive"), "{e}");
+    let mut s = settings(1, true);
+    s.window = Some(prism::core::window::RenderWindow {
+        columns: 0..8,
+        rows: vec![0..8],
+        samples: 0..1,
+    });
+    let e = s.validate().unwrap_err();
+    assert!(e.contains("render window"), "{e}");
+}
+
+/// `film_density` is the change of variables from a surface's area to
+/// film positions that light tracing's splats use: the footprint of a
+/// pixel on a tilted plane, between the points where the rays through the
+/// pixel's corners meet it, has an area of one over the density at its
+/// centre. The footprint is not quite a parallelogram, and the rays are
+/// f32; over one pixel of a 64 x 48 image that came to at most 2.3e-5
+/// here, and 1e-3 is allowed. Without the `cos^3` of the image plane the
+/// corner pixels read 0.14 (tried: this test failed; the agreement test
+/// above did not, the caustics there being near the image's centre).
+#[test]
+fn film_density_is_one_over_a_pixels_footprint() {
+    use glam::{DVec3, Vec2, Vec3A};
+    use prism::scene::camera::{Camera, CameraRays};
+    let camera = Camera {
+        look_from: DVec3::new(1.0, 4.0, 1.5),
+        look_at: DVec3::new(0.0, -1.0, 0.0),
+        vfov_degrees: 90.0,
+        ..Default::default()
+    };
+    let cam = CameraRays::new(&camera, 64, 48);
+    let n = Vec3A::new(0.3, 1.0, 0.2).normalize();
+    let p0 = Vec3A::new(0.0, -1.0, 0.0);
+    let hit = |x: f32, y: f32| {
+        let r = cam.ray(Vec2::new(x, y));
+        let t = (p0 - r.origin).dot(n) as f64 / r.direction.dot(n) as f64;
+        assert!(t > 0.0);
+        r.origin.as_dvec3() + r.direction.as_dvec3() * t
+    };
+    let mut worst = 0.0f64;
+    for (x, y) in [(0, 0), (63, 0), (0, 47), (63, 47), (32, 24), (10, 40)] {
+        let (x, y) = (x as f32, y as f32);
+        let c = [
+            hit(x, y),
+            hit(x + 1.0, y),
+            hit(x + 1.0, y + 1.0),
+            hit(x, y + 1.0),
+        ];
+        let area = 0.5 * (c[2] - c[0]).cross(c[3] - c[1]).length();
+        let centre = hit(x + 0.5, y + 0.5).as_vec3a();
+        let density = prism::transport::caustic::film_density(&cam, centre, n).unwrap() as f64;
+        eprintln!("pixel ({x}, {y}): density x footprint = {}", density * area);
+        worst = worst.max((density * area - 1.0).abs());
+    }
+    assert!(worst < 1e-3, "{worst}");
+    eprintln!("worst relative difference {worst:.2e}");
+}
