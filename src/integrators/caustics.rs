@@ -29,6 +29,7 @@ pub fn add_splats(
     let pixels = settings.width as u64 * settings.height as u64;
     let total = pixels * settings.spp as u64;
     let proj = cam.projection();
+    let targets = caustic::targets(scene);
     let chunks = total.div_ceil(CHUNK) as usize;
     let parts: Vec<(Vec<(u32, Color)>, RenderCounters)> = (0..chunks)
         .into_par_iter()
@@ -39,7 +40,7 @@ pub fn add_splats(
             let c = c as u64;
             for n in c * CHUNK..((c + 1) * CHUNK).min(total) {
                 let mut sampler = caustic::light_sampler(settings, pixels, n);
-                let (v, rays) = caustic::light_subpath(scene, settings, &mut sampler);
+                let (v, rays) = caustic::light_subpath(scene, settings, &targets, &mut sampler);
                 counters.rays.reflection += rays as u64;
                 let Some(v) = v else {
                     continue;

@@ -103,6 +103,7 @@ pub struct CausticVertex {
 pub fn light_subpath(
     scene: &RenderScene,
     settings: &RenderSettings,
+    targets: &[Target],
     sampler: &mut Sampler,
 ) -> (Option<CausticVertex>, u32) {
     let mut rays = 0;
@@ -117,16 +118,19 @@ pub fn light_subpath(
     if !(ls.pdf_area > 0.0) || ls.radiance == Color::ZERO {
         return (None, rays);
     }
-    // Either side emits: one chosen with probability 1/2, then a cosine
-    // distributed direction around it, so `Le cos / (pdf_area / 2 cos /
-    // pi)`.
+    // Either side emits: one chosen with probability 1/2, then a
+    // direction aimed at the specular-like objects ([`aim`]), weighted
+    // `Le cos / (pdf_area / 2 pdf_dir)`.
     let n = if u_side < 0.5 { ls.normal } else { -ls.normal };
-    let [a, b, _, _] = sampler.set_of_four(4);
-    let dir = cosine_hemisphere(n, Vec2::new(a, b));
-    if !(n.dot(dir) > 0.0) {
+    let [a, b, c, _] = sampler.set_of_four(4);
+    let Some((dir, pdf_dir)) = aim(targets, ls.point, n, Vec2::new(a, b), c) else {
+        return (None, rays);
+    };
+    let cos = n.dot(dir);
+    if !(cos > 0.0 && pdf_dir > 0.0) {
         return (None, rays);
     }
-    let mut beta = ls.radiance * (2.0 * PI / ls.pdf_area);
+    let mut beta = ls.radiance * (2.0 * cos / (ls.pdf_area * pdf_dir));
     let mut ray = Ray::new(
         offset_origin_scaled(ls.point, n, ls.point.abs().max_element()),
         dir,
@@ -172,6 +176,107 @@ pub fn light_subpath(
         chain += 1;
         ray = s.ray;
     }
+}
+
+/// A bounding sphere of a specular-like object, which light subpaths aim
+/// at ([`targets`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    /// Centre.
+    pub centre: glam::Vec3A,
+    /// Radius, padded.
+    pub radius: f32,
+}
+
+/// The bounding spheres of the scene's instances whose material is
+/// specular-like (at texture coordinates (0, 0)); empty when one is
+/// unbounded (light subpaths then leave in cosine-distributed
+/// directions).
+pub fn targets(scene: &RenderScene) -> Vec<Target> {
+    let mut out = Vec::new();
+    for inst in scene.instances() {
+        if !specular_like(&scene.surface(inst.material, Vec2::ZERO, 0.0)) {
+            continue;
+        }
+        let Some(b) = inst.world_bounds() else {
+            return Vec::new();
+        };
+        let centre = (b.min + b.max) * 0.5;
+        let radius = (b.max - b.min).length() * 0.5;
+        let pad = 1e-4 * (radius + centre.abs().max_element());
+        if !(radius.is_finite() && centre.is_finite()) {
+            return Vec::new();
+        }
+        out.push(Target {
+            centre,
+            radius: radius + pad,
+        });
+    }
+    out
+}
+
+/// A light subpath's first direction from `p` on the side `n`, drawn with
+/// `u` and `u_pick`, and its density per steradian. With `targets`, one is
+/// picked uniformly and the direction drawn uniformly in the cone of
+/// directions from `p` that meet its sphere; the density sums over every
+/// cone that holds the direction, so that any direction towards any of
+/// them can be drawn (the only ones whose first hit can be specular-like:
+/// the estimator stays unbiased). From inside a sphere, or without
+/// targets, the cosine-distributed direction instead.
+#[inline]
+pub fn aim(
+    targets: &[Target],
+    p: glam::Vec3A,
+    n: glam::Vec3A,
+    u: Vec2,
+    u_pick: f32,
+) -> Option<(glam::Vec3A, f32)> {
+    let cone = |t: &Target| {
+        let to = t.centre - p;
+        let d2 = to.length_squared();
+        let r2 = t.radius * t.radius;
+        (d2 > r2).then(|| {
+            let d = d2.sqrt();
+            let cos_max = ((d2 - r2).max(0.0)).sqrt() / d;
+            (to / d, cos_max)
+        })
+    };
+    if targets.is_empty() || targets.iter().any(|t| cone(t).is_none()) {
+        let dir = cosine_hemisphere(n, u);
+        return Some((dir, n.dot(dir).max(0.0) / PI));
+    }
+    let k = ((u_pick * targets.len() as f32) as usize).min(targets.len() - 1);
+    let (axis, cos_max) = cone(&targets[k])?;
+    let cos_t = 1.0 - u.x * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    let (t, b) = crate::core::math::orthonormal_basis(axis);
+    let dir = (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize();
+    Some((dir, aim_pdf(targets, p, n, dir)))
+}
+
+/// The density per steradian with which [`aim`] draws `dir` from `p` on
+/// the side `n`.
+#[inline]
+pub fn aim_pdf(targets: &[Target], p: glam::Vec3A, n: glam::Vec3A, dir: glam::Vec3A) -> f32 {
+    let mut pdf = 0.0;
+    for t in targets {
+        let to = t.centre - p;
+        let d2 = to.length_squared();
+        let r2 = t.radius * t.radius;
+        if !(d2 > r2) {
+            return n.dot(dir).max(0.0) / PI;
+        }
+        let d = d2.sqrt();
+        let cos_max = ((d2 - r2).max(0.0)).sqrt() / d;
+        if dir.dot(to / d) >= cos_max {
+            pdf += 1.0 / (2.0 * PI * (1.0 - cos_max));
+        }
+    }
+    if targets.is_empty() {
+        return n.dot(dir).max(0.0) / PI;
+    }
+    pdf / targets.len() as f32
 }
 
 /// The sampler of light subpath `n` of a frame of `pixels` pixels: its
