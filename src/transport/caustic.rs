@@ -7,8 +7,9 @@
 //! emitter: rare, bright samples, the speckle over the walls and floor of
 //! `assets/gltf/spheres.gltf` that dominates its error long after the
 //! rest has converged. A *light subpath* goes the other way: it leaves an
-//! emitter (a point by the emitters' own distribution, a
-//! cosine-distributed direction on either side), follows specular-like
+//! emitter (a point by the emitters' own distribution, a direction on
+//! either side aimed at the bounding spheres of the specular-like objects,
+//! [`aim`]), follows specular-like
 //! surfaces ([`specular_like`]) and stops at the first other surface, the
 //! *caustic vertex* `D`, which is then connected to the eye and added to
 //! the pixel it projects to ([`splat`]).

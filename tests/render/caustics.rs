@@ -110,11 +110,7 @@ fn light_tracing_is_refused_where_it_cannot_run() {
     let e = e.to_string();
     assert!(e.contains("--integrator recursive"), "{e}");
     let mut s = settings(1, true);
-    s.window = Some(prism::core::window::RenderWindow {
-        columns: 0..8,
-        rows: vec![0..8],
-        samples: 0..1,
-    });
+    s.window = Some(prism::core::window::RenderWindow::full(8, 8, 1));
     let e = s.validate().unwrap_err();
     assert!(e.contains("render window"), "{e}");
 }
