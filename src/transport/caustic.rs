@@ -48,7 +48,7 @@ use crate::core::sampling::cosine_hemisphere;
 use crate::core::settings::RenderSettings;
 use crate::scene::RenderScene;
 use crate::scene::camera::{CameraProjection, CameraRays};
-use crate::scene::material::SurfaceSample;
+use crate::scene::material::{Material, SurfaceSample};
 use crate::transport::interaction::{Interaction, ShadowQuery, brdf_cos};
 use crate::transport::medium::interior_transmittance;
 use crate::transport::path::{LobeChoice, bsdf_cos, sample_bsdf};
@@ -82,6 +82,19 @@ pub fn specular_like(s: &SurfaceSample) -> bool {
                 && (s.mirror != Color::ZERO || s.transmission > 0.0)
         }
     }
+}
+
+/// Whether some point of a surface of material `m` can be specular-like
+/// ([`specular_like`]) whatever its textures: it has a mirror or a
+/// transmission, or a glTF specular layer whose roughness is textured or
+/// below [`SPECULAR_ALPHA`]'s. Light subpaths aim at every object for
+/// which this holds, so none that path tracing leaves to them is missed.
+pub fn could_be_specular(m: &Material) -> bool {
+    m.transmission > 0.0
+        || m.mirror != Color::ZERO
+        || m.metallic_roughness
+            .as_ref()
+            .is_some_and(|mr| mr.texture.is_some() || mr.roughness * mr.roughness < SPECULAR_ALPHA)
 }
 
 /// The end of a light subpath: where light arrived through a specular
@@ -189,14 +202,14 @@ pub struct Target {
     pub radius: f32,
 }
 
-/// The bounding spheres of the scene's instances whose material is
-/// specular-like (at texture coordinates (0, 0)); empty when one is
-/// unbounded (light subpaths then leave in cosine-distributed
+/// The bounding spheres of the scene's instances whose material could be
+/// specular-like somewhere ([`could_be_specular`]); empty when one of them
+/// is unbounded (light subpaths then leave in cosine-distributed
 /// directions).
 pub fn targets(scene: &RenderScene) -> Vec<Target> {
     let mut out = Vec::new();
     for inst in scene.instances() {
-        if !specular_like(&scene.surface(inst.material, Vec2::ZERO, 0.0)) {
+        if !could_be_specular(&scene.materials()[inst.material as usize]) {
             continue;
         }
         let Some(b) = inst.world_bounds() else {
@@ -294,10 +307,10 @@ pub fn light_sampler(settings: &RenderSettings, pixels: u64, n: u64) -> Sampler 
 
 /// Whether light tracing of caustics runs for this frame: asked for,
 /// path transport in RGB without participating media, area emitters, a
-/// specular-like material (at texture coordinates (0, 0): without one no
-/// light subpath could reach a caustic vertex), a pinhole perspective
-/// camera (`cam`) and no render window. Otherwise path tracing keeps every
-/// path and nothing of light tracing runs.
+/// material that could be specular-like ([`could_be_specular`]; without
+/// one no light subpath could reach a caustic vertex), a pinhole
+/// perspective camera (`cam`) and no render window. Otherwise path
+/// tracing keeps every path and nothing of light tracing runs.
 pub fn applicable(scene: &RenderScene, settings: &RenderSettings, cam: &CameraRays) -> bool {
     settings.caustics
         && settings.transport == crate::core::settings::Transport::Path
@@ -307,8 +320,7 @@ pub fn applicable(scene: &RenderScene, settings: &RenderSettings, cam: &CameraRa
         && !scene.emitters().is_empty()
         && settings.max_depth >= 1
         && cam.pinhole_perspective()
-        && (0..scene.materials().len() as u32)
-            .any(|m| specular_like(&scene.surface(m, Vec2::ZERO, 0.0)))
+        && scene.materials().iter().any(could_be_specular)
 }
 
 /// The BSDF times cosine of `it`'s non-specular lobes towards `wi` (what
