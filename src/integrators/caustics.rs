@@ -17,6 +17,9 @@ use crate::transport::caustic;
 /// Light subpaths per chunk of work.
 const CHUNK: u64 = 1 << 14;
 
+/// Chunks per wave: at most `WAVE * CHUNK` splats of 16 bytes are held.
+const WAVE: usize = 64;
+
 /// Traces `width x height x spp` light subpaths and adds their splats,
 /// divided by that number, to `film` (the whole image, path traced with
 /// light tracing's paths left out). Returns the rays traced.
@@ -31,40 +34,44 @@ pub fn add_splats(
     let proj = cam.projection();
     let targets = caustic::targets(scene);
     let chunks = total.div_ceil(CHUNK) as usize;
-    let parts: Vec<(Vec<(u32, Color)>, RenderCounters)> = (0..chunks)
-        .into_par_iter()
-        .with_max_len(1)
-        .map(|c| {
-            let mut counters = RenderCounters::default();
-            let mut out = Vec::new();
-            let c = c as u64;
-            for n in c * CHUNK..((c + 1) * CHUNK).min(total) {
-                let mut sampler = caustic::light_sampler(settings, pixels, n);
-                let (v, rays) = caustic::light_subpath(scene, settings, &targets, &mut sampler);
-                counters.rays.reflection += rays as u64;
-                let Some(v) = v else {
-                    continue;
-                };
-                let Some((pixel, q)) = caustic::splat(settings, cam, &proj, &v) else {
-                    continue;
-                };
-                counters.rays.shadow += 1;
-                if !scene.occluded(&q.ray, 0.0, q.t_max) {
-                    out.push((pixel, q.radiance));
-                }
-            }
-            (out, counters)
-        })
-        .collect();
     let mut sums = vec![[0.0f64; 3]; pixels as usize];
     let mut counters = RenderCounters::default();
-    for (out, c) in &parts {
-        counters.add(c);
-        for &(p, l) in out {
-            let s = &mut sums[p as usize];
-            s[0] += l.x as f64;
-            s[1] += l.y as f64;
-            s[2] += l.z as f64;
+    // Waves of `WAVE` chunks: each wave's splats are held until they are
+    // added, in chunk order, which bounds the memory (about 16 MB).
+    for wave in (0..chunks).step_by(WAVE) {
+        let parts: Vec<(Vec<(u32, Color)>, RenderCounters)> = (wave..(wave + WAVE).min(chunks))
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|c| {
+                let mut counters = RenderCounters::default();
+                let mut out = Vec::new();
+                let c = c as u64;
+                for n in c * CHUNK..((c + 1) * CHUNK).min(total) {
+                    let mut sampler = caustic::light_sampler(settings, pixels, n);
+                    let (v, rays) = caustic::light_subpath(scene, settings, &targets, &mut sampler);
+                    counters.rays.reflection += rays as u64;
+                    let Some(v) = v else {
+                        continue;
+                    };
+                    let Some((pixel, q)) = caustic::splat(settings, cam, &proj, &v) else {
+                        continue;
+                    };
+                    counters.rays.shadow += 1;
+                    if !scene.occluded(&q.ray, 0.0, q.t_max) {
+                        out.push((pixel, q.radiance));
+                    }
+                }
+                (out, counters)
+            })
+            .collect();
+        for (out, c) in &parts {
+            counters.add(c);
+            for &(p, l) in out {
+                let s = &mut sums[p as usize];
+                s[0] += l.x as f64;
+                s[1] += l.y as f64;
+                s[2] += l.z as f64;
+            }
         }
     }
     let scale = 1.0 / total as f64;

@@ -134,7 +134,10 @@ pub fn light_subpath(
     }
     // Either side emits: one chosen with probability 1/2, then a
     // direction aimed at the specular-like objects ([`aim`]), weighted
-    // `Le cos / (pdf_area / 2 pdf_dir)`.
+    // `Le cos / (pdf_area / 2 pdf_dir)`. (Letting the aimed direction
+    // pick the side instead doubles the subpaths that reach a caustic
+    // vertex, but cost more time than the error it saved: measurement
+    // log, stop 41.)
     let n = if u_side < 0.5 { ls.normal } else { -ls.normal };
     let [a, b, c, _] = sampler.set_of_four(4);
     let Some((dir, pdf_dir)) = aim(targets, ls.point, n, Vec2::new(a, b), c) else {
