@@ -97,6 +97,9 @@ struct FileSettings {
     light_samples: Option<u32>,
     /// Russian roulette start depth; `false` turns it off.
     russian_roulette: Option<FileRoulette>,
+    /// Light tracing of directly seen caustics (path transport, recursive
+    /// integrator).
+    caustics: Option<bool>,
     /// Structure over mesh triangles: bvh, kdtree, grid or brute.
     accel: Option<crate::core::settings::Accel>,
     /// `"shaded"` or `"gooch"`.
@@ -749,7 +752,7 @@ impl Ctx<'_> {
             .map_err(|e| self.err(format!("settings.photon: {e}")))?;
         Ok(SettingsDesc {
             photon,
-            caustics: None,
+            caustics: s.caustics,
             width: s.width,
             height: s.height,
             spp: s.spp,

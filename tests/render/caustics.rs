@@ -216,3 +216,19 @@ fn aimed_directions_have_a_normalised_density() {
         }));
     }
 }
+
+/// A scene file turns light tracing on with `caustics = true` in its
+/// `[settings]`, and leaves it off without the key.
+#[test]
+fn scene_files_turn_light_tracing_on() {
+    let scene = |settings: &str| {
+        format!(
+            "[settings]\ntransport = \"path\"\n{settings}\n[camera]\nlook_from = [0.0, 1.0, 4.0]\n\
+             look_at = [0.0, 0.0, 0.0]\n\n[[objects]]\nshape = {{ type = \"sphere\", radius = 1.0 }}\n"
+        )
+    };
+    let on = scenes::load_toml(&scene("caustics = true")).unwrap();
+    assert!(on.settings.resolve(&Default::default()).caustics);
+    let off = scenes::load_toml(&scene("")).unwrap();
+    assert!(!off.settings.resolve(&Default::default()).caustics);
+}

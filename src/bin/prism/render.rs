@@ -225,7 +225,7 @@ pub struct RenderArgs {
     /// is connected to the eye and added to the pixel it projects to. This
     /// takes over from path tracing the caustics seen directly, which it
     /// finds only by chance (unbiased either way). Pinhole perspective
-    /// cameras, whole images.
+    /// cameras, whole images [default: the scene's `caustics`, else off].
     #[arg(long)]
     caustics: bool,
     /// BVH build preset, from fastest build to best traversal.
