@@ -248,22 +248,12 @@ pub fn aim(
     u: Vec2,
     u_pick: f32,
 ) -> Option<(glam::Vec3A, f32)> {
-    let cone = |t: &Target| {
-        let to = t.centre - p;
-        let d2 = to.length_squared();
-        let r2 = t.radius * t.radius;
-        (d2 > r2).then(|| {
-            let d = d2.sqrt();
-            let cos_max = ((d2 - r2).max(0.0)).sqrt() / d;
-            (to / d, cos_max)
-        })
-    };
-    if targets.is_empty() || targets.iter().any(|t| cone(t).is_none()) {
+    if targets.is_empty() || targets.iter().any(|t| cone(t, p).is_none()) {
         let dir = cosine_hemisphere(n, u);
         return Some((dir, n.dot(dir).max(0.0) / PI));
     }
     let k = ((u_pick * targets.len() as f32) as usize).min(targets.len() - 1);
-    let (axis, cos_max) = cone(&targets[k])?;
+    let (axis, cos_max) = cone(&targets[k], p)?;
     let cos_t = 1.0 - u.x * (1.0 - cos_max);
     let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
@@ -272,21 +262,29 @@ pub fn aim(
     Some((dir, aim_pdf(targets, p, n, dir)))
 }
 
+/// The cone of directions from `p` that meet `t`'s sphere: its unit axis
+/// and the cosine of its half-angle; `None` from inside the sphere.
+#[inline]
+fn cone(t: &Target, p: glam::Vec3A) -> Option<(glam::Vec3A, f32)> {
+    let to = t.centre - p;
+    let d2 = to.length_squared();
+    let r2 = t.radius * t.radius;
+    (d2 > r2).then(|| {
+        let d = d2.sqrt();
+        (to / d, (d2 - r2).max(0.0).sqrt() / d)
+    })
+}
+
 /// The density per steradian with which [`aim`] draws `dir` from `p` on
 /// the side `n`.
 #[inline]
 pub fn aim_pdf(targets: &[Target], p: glam::Vec3A, n: glam::Vec3A, dir: glam::Vec3A) -> f32 {
     let mut pdf = 0.0;
     for t in targets {
-        let to = t.centre - p;
-        let d2 = to.length_squared();
-        let r2 = t.radius * t.radius;
-        if !(d2 > r2) {
+        let Some((axis, cos_max)) = cone(t, p) else {
             return n.dot(dir).max(0.0) / PI;
-        }
-        let d = d2.sqrt();
-        let cos_max = ((d2 - r2).max(0.0)).sqrt() / d;
-        if dir.dot(to / d) >= cos_max {
+        };
+        if dir.dot(axis) >= cos_max {
             pdf += 1.0 / (2.0 * PI * (1.0 - cos_max));
         }
     }
