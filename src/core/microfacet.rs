@@ -123,6 +123,17 @@ pub fn sample_visible_normal(alpha: f32, wo: Vec3A, u: Vec2) -> Vec3A {
 }
 
 impl GltfBrdf {
+    /// True when the specular layers are absent: no metal and a
+    /// dielectric layer whose Fresnel is zero at every angle
+    /// (`KHR_materials_specular` factor 0), so the BRDF is the Lambertian
+    /// base alone. [`GltfBrdf::eval_cos`] and [`GltfBrdf::lobe_weights`]
+    /// then skip the microfacet terms, which would be multiplied by zero:
+    /// the results are the same bits.
+    #[inline]
+    pub fn is_lambertian(&self) -> bool {
+        self.metallic == 0.0 && self.dielectric_f90 == 0.0 && self.dielectric_f0 == Color::ZERO
+    }
+
     /// Dielectric Fresnel at `cos`, weighted by `KHR_materials_specular`.
     #[inline]
     fn dielectric_fresnel(&self, cos: f32) -> Color {
@@ -143,6 +154,9 @@ impl GltfBrdf {
         let cos_o = n.dot(wo);
         if cos_i <= 0.0 || cos_o <= 0.0 {
             return Color::ZERO;
+        }
+        if self.is_lambertian() {
+            return self.diffuse * (1.0 / PI) * cos_i;
         }
         let h = (wo + wi).normalize_or_zero();
         let cos_h = n.dot(h);
@@ -193,6 +207,9 @@ impl GltfBrdf {
     /// specular layers when sampling, from their reflectance seen from
     /// `cos_o`: `(diffuse, specular)` luminances.
     pub fn lobe_weights(&self, cos_o: f32) -> (f32, f32) {
+        if self.is_lambertian() {
+            return (crate::core::math::luminance(self.diffuse).max(0.0), 0.0);
+        }
         let fd = self.dielectric_fresnel(cos_o.max(0.0));
         let spec = self.metal_fresnel(cos_o.max(0.0)) * self.metallic + fd * self.dielectric_weight;
         let diffuse = self.diffuse * (1.0 - max_component(fd)).max(0.0);
