@@ -70,6 +70,8 @@ pub struct SettingsDesc {
     pub light_samples: Option<u32>,
     /// Russian roulette start depth; `Some(None)` turns it off.
     pub rr_start_depth: Option<Option<u32>>,
+    /// Russian roulette's weight.
+    pub rr_weight: Option<f32>,
     /// Structure over mesh triangles asked for by the file (applied when
     /// it was loaded; kept for reporting).
     pub accel: Option<crate::core::settings::Accel>,
@@ -119,6 +121,7 @@ impl SettingsDesc {
                 .rr_start_depth
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
+            rr_weight: self.rr_weight.or(under.rr_weight).unwrap_or(d.rr_weight),
             window: None,
             style: self.style.or(under.style).unwrap_or(d.style),
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),

@@ -97,6 +97,8 @@ struct FileSettings {
     light_samples: Option<u32>,
     /// Russian roulette start depth; `false` turns it off.
     russian_roulette: Option<FileRoulette>,
+    /// Russian roulette's weight, in (0, 1].
+    rr_weight: Option<f32>,
     /// Light tracing of directly seen caustics (path transport, recursive
     /// integrator).
     caustics: Option<bool>,
@@ -698,6 +700,11 @@ impl Ctx<'_> {
                 "settings.min_contribution must be finite and non-negative, got {m}"
             )));
         }
+        if let Some(w) = s.rr_weight
+            && !(w > 0.0 && w <= 1.0)
+        {
+            return Err(self.err(format!("settings.rr_weight must be in (0, 1], got {w}")));
+        }
         if let Some(d) = s.max_depth {
             // The recursive integrator recurses once per bounce: between two
             // facing perfect mirrors a depth of 20000 overflowed its stack
@@ -772,6 +779,7 @@ impl Ctx<'_> {
                 FileRoulette::Enabled(false) => None,
                 FileRoulette::StartDepth(d) => Some(d),
             }),
+            rr_weight: s.rr_weight,
             accel: s.accel,
             style: s.style.map(|t| match t {
                 FileStyle::Shaded => crate::core::settings::Style::Shaded,

@@ -559,12 +559,12 @@ pub fn emitted(
 /// Russian roulette at a path vertex of depth `depth`: `Some(scale)` if
 /// the path goes on, its throughput multiplied by `scale` (at least 1),
 /// `None` if it ends. Survival probability is the throughput's largest
-/// channel, capped at 1.
+/// channel over [`RenderSettings::rr_weight`], capped at 1.
 #[inline]
 pub fn roulette(settings: &RenderSettings, depth: u32, throughput: Color, u: f32) -> Option<f32> {
     match settings.rr_start_depth {
         Some(start) if depth >= start => {
-            let q = max_component(throughput).min(1.0);
+            let q = (max_component(throughput) / settings.rr_weight).min(1.0);
             (q > 0.0 && u < q).then(|| 1.0 / q)
         }
         _ => Some(1.0),
@@ -628,6 +628,7 @@ mod tests {
     fn roulette_keeps_the_expectation() {
         let settings = RenderSettings {
             rr_start_depth: Some(1),
+            rr_weight: 1.0,
             ..Default::default()
         };
         let t = Color::new(0.3, 0.2, 0.1);
@@ -643,5 +644,45 @@ mod tests {
         // 0.3, standard error sqrt(0.3 * 0.7 / n) = 1.45e-3; 5 sigma.
         assert!((sum / n as f64 - 0.3).abs() < 5.0 * 1.45e-3);
         assert_eq!(roulette(&settings, 0, t, 0.99), Some(1.0));
+    }
+
+    #[test]
+    fn roulette_spares_paths_at_its_weight_and_lifts_lighter_ones_to_it() {
+        let settings = RenderSettings {
+            rr_start_depth: Some(1),
+            rr_weight: 0.25,
+            ..Default::default()
+        };
+        // At or above the weight: never ended, never rescaled.
+        for t in [Color::new(0.3, 0.2, 0.1), Color::new(0.0, 0.25, 0.0)] {
+            for u in [0.0, 0.5, 0.999_999] {
+                assert_eq!(roulette(&settings, 1, t, u), Some(1.0), "{t} {u}");
+            }
+        }
+        // Below it: survival 0.05 / 0.25 = 0.2, survivors weighed up to
+        // 0.25; the mean stays 0.05.
+        let t = Color::new(0.05, 0.02, 0.01);
+        let n = 100_000;
+        let (mut sum, mut survivors) = (0.0f64, 0u32);
+        for i in 0..n {
+            let u = Sampler::new(2, i, 0).next_f32();
+            if let Some(s) = roulette(&settings, 1, t, u) {
+                assert!((s * 0.05 - 0.25).abs() < 1e-6, "{s}");
+                sum += s as f64 * 0.05;
+                survivors += 1;
+            }
+        }
+        // Each survivor carries 0.25 with probability 0.2: mean 0.05,
+        // standard error 0.25 sqrt(0.2 * 0.8 / n) = 3.2e-4; 5 sigma.
+        assert!(
+            (sum / n as f64 - 0.05).abs() < 5.0 * 3.2e-4,
+            "{}",
+            sum / n as f64
+        );
+        let p = survivors as f64 / n as f64;
+        assert!(
+            (p - 0.2).abs() < 5.0 * (0.2f64 * 0.8 / n as f64).sqrt(),
+            "{p}"
+        );
     }
 }

@@ -71,6 +71,7 @@ fn expected_words(name: &str) -> &'static [&'static str] {
         "huge_torus_knot.toml" => &["torus_knot", "4000000"],
         "zero_area_polygon.toml" => &["zero area"],
         "deep_recursion.toml" => &["max_depth", "1024"],
+        "bad_rr_weight.toml" => &["rr_weight", "(0, 1]"],
         _ => &[],
     }
 }
@@ -171,6 +172,7 @@ fn help_explains_every_option() {
         "--spp",
         "--max-depth",
         "--min-contribution",
+        "--rr-weight",
         "--threads",
         "--seed",
         "--camera",
@@ -758,6 +760,20 @@ fn the_sample_environment_map_renders() {
     let img = image::open(&out_file).unwrap().to_rgb32f();
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
     assert!(img.pixels().any(|p| p.0[1] > 0.1));
+}
+
+/// `--rr-weight` outside (0, 1], or not a number, is refused with a
+/// message naming it, before anything is written.
+#[test]
+fn rr_weight_rejects_bad_values_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = assets().join("cornell.toml");
+    let out = dir.path().join("c.png");
+    for w in ["0", "-0.5", "1.5", "nan", "inf"] {
+        let flag = format!("--rr-weight={w}");
+        let o = render(&scene, &out, &["--width", "8", "--height", "6", &flag]);
+        assert_clean_failure(&o, &out, &["Russian roulette weight", "(0, 1]"]);
+    }
 }
 
 /// Photon transport's options reject bad values with a clear message, and

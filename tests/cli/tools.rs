@@ -196,7 +196,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
 }
 
 const HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight";
 
 fn tradeoff(out: &Path, extra: &[&str]) -> Output {
     prism()
@@ -254,10 +254,10 @@ fn tradeoff_writes_the_csv_and_plots() {
     assert_eq!(lines[0], HEADER);
     // The base, then every knob's values but the base's: spp 6 of 7, depth
     // 6 of 7, threshold 5 of 6, light samples 3 of 4, roulette 3 of 4,
-    // BVH 5 of 6, transport 3 of 4 (whitted, photon, radiosity), sampler
+    // roulette weight 3 of 4, BVH 5 of 6, transport 3 of 4 (whitted, photon, radiosity), sampler
     // 1 of 2, accel 2 of 3 (the photon-iterations knob is not swept by
     // default).
-    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 3 + 5 + 3 + 1 + 2);
+    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 3 + 3 + 5 + 3 + 1 + 2);
     for t in ["transport,photon,", "transport,radiosity,"] {
         assert!(lines.iter().any(|l| l.starts_with(t)), "no {t} row");
     }
@@ -272,6 +272,7 @@ fn tradeoff_writes_the_csv_and_plots() {
         "min-contribution",
         "light-samples",
         "russian-roulette",
+        "rr-weight",
         "bvh",
         "transport",
         "sampler",
@@ -281,7 +282,7 @@ fn tradeoff_writes_the_csv_and_plots() {
     }
     for l in &lines[1..] {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 16, "{l}");
+        assert_eq!(f.len(), 17, "{l}");
         let spp: u64 = f[3].parse().unwrap();
         let seconds: f64 = f[10].parse().unwrap();
         let rays: u64 = f[11].parse().unwrap();
@@ -293,6 +294,8 @@ fn tradeoff_writes_the_csv_and_plots() {
             assert!(m.is_finite() && m >= 0.0, "{l}");
         }
         assert!(["bvh", "kdtree", "grid"].contains(&f[15]), "{l}");
+        let w: f32 = f[16].parse().unwrap();
+        assert!(w > 0.0 && w <= 1.0, "{l}");
     }
     let spp1 = lines.iter().find(|l| l.starts_with("spp,1,")).unwrap();
     assert!(spp1.starts_with("spp,1,path,1,8,"), "{spp1}");

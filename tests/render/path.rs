@@ -71,16 +71,24 @@ shape = {{ type = "sphere", radius = 2.0 }}
 material = {{ color = {albedo}, emission = {le} }}
 "#
         );
-        // a^(depth+1) must be negligible against the tolerance: 0.8^121 < 1e-11.
-        let settings = path_settings(16, 16, 120);
         let expected = le / (1.0 - albedo);
-        for kind in IntegratorKind::ALL {
+        // Russian roulette from bounce 5 (the default), by the classic rule
+        // (weight 1) and by the default weight: unbiased either way.
+        for (kind, rr_weight) in IntegratorKind::ALL
+            .into_iter()
+            .flat_map(|k| [(k, 1.0), (k, prism::core::settings::DEFAULT_RR_WEIGHT)])
+        {
+            // a^(depth+1) must be negligible against the tolerance: 0.8^121 < 1e-11.
+            let settings = RenderSettings {
+                rr_weight,
+                ..path_settings(16, 16, 120)
+            };
             let film = render_text(&scene, &settings, kind);
             assert!(film.pixels.iter().all(|p| p.is_finite()));
             let (mean, err) = mean_and_error(&green(&film));
             assert!(
                 (mean - expected).abs() < 5.0 * err + 1e-6,
-                "{kind:?} albedo {albedo}: mean {mean} vs {expected} (standard error {err})"
+                "{kind:?} albedo {albedo} rr weight {rr_weight}: mean {mean} vs {expected} (standard error {err})"
             );
             // The estimate must be a real one, not a lucky constant.
             assert!(err > 0.0 && err < 0.02 * expected, "standard error {err}");

@@ -71,7 +71,7 @@ pub struct SeedFlag {
     pub seed: Option<u64>,
 }
 
-/// `--light-samples`, `--rr-depth` (render, tradeoff).
+/// `--light-samples`, `--rr-depth`, `--rr-weight`, `--sampler` (render, tradeoff).
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct PathFlags {
     /// Path tracing: shadow rays per area light at each hit
@@ -82,6 +82,12 @@ pub struct PathFlags {
     /// [default: the scene's, else 5].
     #[arg(long, value_name = "DEPTH")]
     pub rr_depth: Option<u32>,
+    /// Path tracing: Russian roulette's weight. Paths whose throughput is
+    /// at least this are never ended by roulette; lighter ones go on with
+    /// probability throughput / weight (1: the classic rule, as Mitsuba's)
+    /// [default: the scene's, else 0.25].
+    #[arg(long, value_name = "WEIGHT")]
+    pub rr_weight: Option<f32>,
     /// Random numbers: Owen-scrambled Sobol points, stratified per pixel,
     /// or independent hashed numbers [default: the scene's, else sobol].
     #[arg(long, value_enum)]

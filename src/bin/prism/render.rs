@@ -600,6 +600,7 @@ fn render_with_pool(
         seed: args.seed.seed,
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
+        rr_weight: args.path.rr_weight,
         sampler: args.path.sampler(),
         radiosity: args.radiosity.desc(),
         panorama: args.projection.get(),

@@ -131,6 +131,9 @@ pub enum Knob {
     LightSamples,
     /// Russian roulette: off, from bounce 1, from the base depth (3).
     RussianRoulette,
+    /// Russian roulette's weight: 1 (the classic rule), 0.5, 0.25 (the
+    /// default), 0.125.
+    RrWeight,
     /// BVH build preset, fastest to very slow (the scene is reloaded).
     Bvh,
     /// Light transport: Whitted, path tracing, photon mapping, radiosity.
@@ -147,12 +150,13 @@ pub enum Knob {
 
 impl Knob {
     /// Every knob, in sweep order.
-    pub const ALL: [Knob; 10] = [
+    pub const ALL: [Knob; 11] = [
         Knob::Spp,
         Knob::MaxDepth,
         Knob::MinContribution,
         Knob::LightSamples,
         Knob::RussianRoulette,
+        Knob::RrWeight,
         Knob::Bvh,
         Knob::Transport,
         Knob::Sampler,
@@ -168,6 +172,7 @@ impl Knob {
             Knob::MinContribution => "min-contribution",
             Knob::LightSamples => "light-samples",
             Knob::RussianRoulette => "russian-roulette",
+            Knob::RrWeight => "rr-weight",
             Knob::Bvh => "bvh",
             Knob::Transport => "transport",
             Knob::Sampler => "sampler",
@@ -190,6 +195,7 @@ const RR_VALUES: [Option<u32>; 4] = [
     Some(prism::core::settings::DEFAULT_RR_START_DEPTH),
 ];
 const _: () = assert!(prism::core::settings::DEFAULT_RR_START_DEPTH != 3);
+const RR_WEIGHT_VALUES: [f32; 4] = [1.0, 0.5, 0.25, 0.125];
 const BVH_VALUES: [BuildQuality; 6] = [
     BuildQuality::Fastest,
     BuildQuality::VeryFast,
@@ -260,6 +266,7 @@ impl Knob {
                 .collect(),
             Knob::LightSamples => LIGHT_SAMPLE_VALUES.iter().map(|v| v.to_string()).collect(),
             Knob::RussianRoulette => RR_VALUES.iter().map(|&v| rr_name(v)).collect(),
+            Knob::RrWeight => RR_WEIGHT_VALUES.iter().map(|v| v.to_string()).collect(),
             Knob::Bvh => BVH_VALUES
                 .iter()
                 .map(|&v| bvh_name(v).to_string())
@@ -289,6 +296,7 @@ impl Knob {
             Knob::MinContribution => s.min_contribution = MIN_CONTRIBUTION_VALUES[i],
             Knob::LightSamples => s.light_samples = LIGHT_SAMPLE_VALUES[i],
             Knob::RussianRoulette => s.rr_start_depth = RR_VALUES[i],
+            Knob::RrWeight => s.rr_weight = RR_WEIGHT_VALUES[i],
             Knob::Bvh => c.bvh = BVH_VALUES[i],
             Knob::Accel => c.accel = ACCEL_VALUES[i],
             Knob::Transport => s.transport = TRANSPORT_VALUES[i],
@@ -309,6 +317,7 @@ impl Knob {
             Knob::MinContribution => s.min_contribution.to_string(),
             Knob::LightSamples => s.light_samples.to_string(),
             Knob::RussianRoulette => rr_name(s.rr_start_depth),
+            Knob::RrWeight => s.rr_weight.to_string(),
             Knob::Bvh => bvh_name(c.bvh).to_string(),
             Knob::Accel => c.accel.name().to_string(),
             Knob::Transport => s.transport.name().to_string(),
@@ -365,7 +374,7 @@ pub struct Row {
 
 /// The CSV header.
 pub const CSV_HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight";
 
 fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
     let mut s = String::from(CSV_HEADER);
@@ -374,7 +383,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
         let c = &r.planned.config.settings;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.planned.knob,
             r.planned.value,
             c.transport.name(),
@@ -391,6 +400,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
             r.metrics.rel_mse,
             r.metrics.flip,
             r.planned.config.accel.name(),
+            c.rr_weight,
         );
     }
     s
@@ -480,6 +490,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         transport: Some(Transport::Path),
         light_samples: args.path.light_samples,
         rr_start_depth: args.path.rr_depth.map(Some),
+        rr_weight: args.path.rr_weight,
         sampler: args.path.sampler(),
         photon: args.photon.overrides(),
         radiosity: args.radiosity.desc(),
@@ -723,6 +734,7 @@ mod tests {
         assert_eq!(count("min-contribution"), MIN_CONTRIBUTION_VALUES.len() - 1);
         assert_eq!(count("light-samples"), LIGHT_SAMPLE_VALUES.len() - 1);
         assert_eq!(count("russian-roulette"), RR_VALUES.len() - 1);
+        assert_eq!(count("rr-weight"), RR_WEIGHT_VALUES.len() - 1);
         assert_eq!(count("bvh"), BVH_VALUES.len() - 1);
         assert_eq!(count("accel"), ACCEL_VALUES.len() - 1);
         assert_eq!(count("transport"), TRANSPORT_VALUES.len() - 1);
@@ -737,6 +749,7 @@ mod tests {
                 "min-contribution" => c.settings.min_contribution = base.settings.min_contribution,
                 "light-samples" => c.settings.light_samples = base.settings.light_samples,
                 "russian-roulette" => c.settings.rr_start_depth = base.settings.rr_start_depth,
+                "rr-weight" => c.settings.rr_weight = base.settings.rr_weight,
                 "bvh" => c.bvh = base.bvh,
                 "accel" => c.accel = base.accel,
                 "transport" => c.settings.transport = base.settings.transport,

@@ -94,6 +94,7 @@ fn point_label(r: &Row) -> String {
         "min-contribution" => format!("min {}", r.planned.value),
         "light-samples" => format!("{} ls", r.planned.value),
         "russian-roulette" => format!("rr {}", r.planned.value),
+        "rr-weight" => format!("rr weight {}", r.planned.value),
         "bvh" => format!("bvh {}", r.planned.value),
         _ => r.planned.value.clone(),
     }
