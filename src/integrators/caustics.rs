@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::core::math::Color;
 use crate::core::settings::RenderSettings;
 use crate::image::film::Film;
+use crate::integrators::Progress;
 use crate::integrators::counters::RenderCounters;
 use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
@@ -22,12 +23,14 @@ const WAVE: usize = 64;
 
 /// Traces `width x height x spp` light subpaths and adds their splats,
 /// divided by that number, to `film` (the whole image, path traced with
-/// light tracing's paths left out). Returns the rays traced.
+/// light tracing's paths left out). Reports [`caustic::light_pass_rows`]
+/// rows of progress in all, as the waves finish. Returns the rays traced.
 pub fn add_splats(
     scene: &RenderScene,
     settings: &RenderSettings,
     cam: &CameraRays,
     film: &mut Film,
+    progress: Option<Progress<'_>>,
 ) -> RenderCounters {
     let pixels = settings.width as u64 * settings.height as u64;
     let total = pixels * settings.spp as u64;
@@ -36,6 +39,8 @@ pub fn add_splats(
     let chunks = total.div_ceil(CHUNK) as usize;
     let mut sums = vec![[0.0f64; 3]; pixels as usize];
     let mut counters = RenderCounters::default();
+    let rows = caustic::light_pass_rows(settings);
+    let mut reported = 0;
     // Waves of `WAVE` chunks: each wave's splats are held until they are
     // added, in chunk order, which bounds the memory (about 16 MB).
     for wave in (0..chunks).step_by(WAVE) {
@@ -72,6 +77,12 @@ pub fn add_splats(
                 s[1] += l.y as f64;
                 s[2] += l.z as f64;
             }
+        }
+        if let Some(p) = progress {
+            let done = (((wave + WAVE) as u64 * CHUNK).min(total) as u128 * rows as u128
+                / total as u128) as u64;
+            p(done - reported);
+            reported = done;
         }
     }
     let scale = 1.0 / total as f64;

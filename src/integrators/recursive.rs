@@ -632,8 +632,14 @@ pub fn render(
     });
     let cam = camera_rays(scene, camera, settings);
     if caustic::applicable(scene, settings, &cam) {
-        let c = super::caustics::add_splats(scene, settings, &cam, &mut film);
+        let c = super::caustics::add_splats(scene, settings, &cam, &mut film, progress);
         counters.add(&c);
+    } else if let Some(p) = progress
+        && caustic::light_pass_rows(settings) > 0
+    {
+        // Asked for, but nothing to trace (no mirror or glass, say): the
+        // pass is done.
+        p(caustic::light_pass_rows(settings));
     }
     (film, counters)
 }

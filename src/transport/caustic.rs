@@ -306,6 +306,19 @@ pub fn light_sampler(settings: &RenderSettings, pixels: u64, n: u64) -> Sampler 
     Sampler::with_kind(settings.sampler, settings.seed, pixel, sample).fork(LIGHT_SUBPATH_SALT)
 }
 
+/// Rows of progress that a recursive render with these settings reports
+/// for its light pass ([`crate::integrators::Progress`]), on top of one
+/// per pixel row of the camera pass: the image's height when light
+/// tracing was asked for under path transport on the whole image (also
+/// when [`applicable`] then finds nothing to trace: the pass is reported
+/// done at once), else 0.
+pub fn light_pass_rows(settings: &RenderSettings) -> u64 {
+    let asked = settings.caustics
+        && settings.transport == crate::core::settings::Transport::Path
+        && settings.window.is_none();
+    if asked { settings.height as u64 } else { 0 }
+}
+
 /// Whether light tracing of caustics runs for this frame: asked for,
 /// path transport in RGB without participating media, area emitters, a
 /// material that could be specular-like ([`could_be_specular`]; without

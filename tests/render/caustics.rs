@@ -232,3 +232,33 @@ fn scene_files_turn_light_tracing_on() {
     let off = scenes::load_toml(&scene("")).unwrap();
     assert!(!off.settings.resolve(&Default::default()).caustics);
 }
+
+/// The light pass reports progress: a recursive render with light tracing
+/// counts the image's height twice, once for the camera pass's rows and
+/// once for the light subpaths (also when the scene has nothing for them
+/// to trace and the pass is skipped); without it, once.
+#[test]
+fn light_pass_reports_progress() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let cornell = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/gltf/cornell.gltf");
+    for (scene, caustics, passes) in [
+        (spheres(), true, 2),
+        (spheres(), false, 1),
+        (cornell, true, 2),
+    ] {
+        let count = Arc::new(AtomicU64::new(0));
+        let c = count.clone();
+        let mut cfg = config(settings(4, caustics), IntegratorKind::Recursive);
+        cfg.progress = Some(Arc::new(move |n| {
+            c.fetch_add(n, Ordering::Relaxed);
+        }));
+        render_file(&scene, cfg).film.unwrap();
+        assert_eq!(
+            count.load(Ordering::Relaxed),
+            passes * 48,
+            "{} caustics {caustics}",
+            scene.display()
+        );
+    }
+}

@@ -671,8 +671,16 @@ fn render_with_pool(
             "{spinner} photon mapping [{bar:40}] {percent}% {elapsed_precise} (eta {eta})",
         )
     } else {
+        // Light tracing of caustics (recursive integrator) reports a
+        // pass of as many rows.
+        let light = match args.integrator.kind() {
+            prism::integrators::IntegratorKind::Recursive => {
+                prism::transport::caustic::light_pass_rows(&settings)
+            }
+            _ => 0,
+        };
         progress_bar(
-            settings.window().row_count() as u64 * passes,
+            settings.window().row_count() as u64 * passes + light,
             args.quiet,
             "{spinner} rendering [{bar:40}] {pos}/{len} rows {elapsed_precise} (eta {eta})",
         )
