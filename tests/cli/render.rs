@@ -173,6 +173,7 @@ fn help_explains_every_option() {
         "--max-depth",
         "--min-contribution",
         "--rr-weight",
+        "--no-caustics",
         "--threads",
         "--seed",
         "--camera",
@@ -760,6 +761,31 @@ fn the_sample_environment_map_renders() {
     let img = image::open(&out_file).unwrap().to_rgb32f();
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
     assert!(img.pixels().any(|p| p.0[1] > 0.1));
+}
+
+/// `--no-caustics` turns off the light tracing a scene's `[settings]`
+/// ask for: the wavefront integrator, which refuses it, then renders.
+#[test]
+fn no_caustics_overrides_the_scene_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("c.toml");
+    std::fs::write(
+        &scene,
+        "[settings]\ntransport = \"path\"\ncaustics = true\n[camera]\nlook_from = [0, 0, 5]\n\
+         look_at = [0, 0, 0]\n[[objects]]\nshape = { type = \"sphere\", radius = 1.0 }\n",
+    )
+    .unwrap();
+    let out = dir.path().join("c.png");
+    let small = ["--width", "8", "--height", "6", "--integrator", "wavefront"];
+    assert_clean_failure(
+        &render(&scene, &out, &small),
+        &out,
+        &["--integrator recursive"],
+    );
+    let mut args = small.to_vec();
+    args.push("--no-caustics");
+    assert_success(&render(&scene, &out, &args));
+    assert!(out.exists());
 }
 
 /// `--rr-weight` outside (0, 1], or not a number, is refused with a

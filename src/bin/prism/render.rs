@@ -228,6 +228,10 @@ pub struct RenderArgs {
     /// cameras, whole images [default: the scene's `caustics`, else off].
     #[arg(long)]
     caustics: bool,
+    /// Path tracing: no light tracing of caustics, even where the scene's
+    /// `[settings]` ask for it.
+    #[arg(long, conflicts_with = "caustics")]
+    no_caustics: bool,
     /// BVH build preset, from fastest build to best traversal.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     bvh_quality: QualityArg,
@@ -605,7 +609,11 @@ fn render_with_pool(
         radiosity: args.radiosity.desc(),
         panorama: args.projection.get(),
         photon: args.photon.overrides(),
-        caustics: args.caustics.then_some(true),
+        caustics: if args.no_caustics {
+            Some(false)
+        } else {
+            args.caustics.then_some(true)
+        },
         rr_start_depth: if args.no_russian_roulette {
             Some(None)
         } else {
