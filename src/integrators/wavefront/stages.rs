@@ -460,30 +460,29 @@ pub struct ShadeInput<'a> {
     pub wavelengths: &'a [f32],
 }
 
-/// The hit item and interaction of a ray's closest hit, the item's
-/// throughput attenuated by what its segment crossed.
+/// The interaction of the hit item `h` (built where it is kept: returned
+/// in a pair with the item, as before, it cost two copies of its 300
+/// bytes per hit, 2.7% of a path-traced `cornell.toml`).
 #[inline(always)]
-fn prepare_hit(
-    scene: &RenderScene,
-    settings: &RenderSettings,
-    hit: &Hit,
-    ray: &RayItem,
-) -> (HitItem, Interaction) {
-    let mut h = HitItem::new(hit, ray);
-    let it = Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone);
+fn interaction(scene: &RenderScene, h: &HitItem) -> Interaction {
+    Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone)
+}
+
+/// Attenuates `h`'s throughput by what its segment crossed.
+#[inline(always)]
+fn attenuate(scene: &RenderScene, settings: &RenderSettings, h: &mut HitItem, it: &Interaction) {
     // A segment that ran through an absorbing interior carries its
     // transmittance to everything seen at its end. In a scene with media,
     // path transport has weighed the segment in `sample_media`, and
     // Whitted transport attenuates it by its medium's extinction.
     let tr = if scene.has_media() {
-        whitted_media_transmittance(scene, settings, &h)
+        whitted_media_transmittance(scene, settings, h)
     } else {
-        interior_transmittance(&it, h.distance)
+        interior_transmittance(it, h.distance)
     };
     if let Some(tr) = tr {
         h.throughput *= tr;
     }
-    (h, it)
 }
 
 /// True when surfaces' shadow rays are followed through media with their
@@ -554,7 +553,9 @@ fn shade_hits(
                     debug_assert!(false, "ray {i} is queued for shading without a hit");
                     continue;
                 };
-                let (h, mut it) = prepare_hit(scene, settings, hit, &rays.get(i));
+                let mut h = HitItem::new(hit, &rays.get(i));
+                let mut it = interaction(scene, &h);
+                attenuate(scene, settings, &mut h, &it);
                 kernel(&h, &mut it, out);
                 out.end_hit();
             }
@@ -757,7 +758,9 @@ fn shade_lit_in_lanes<const SCATTER: bool>(
                         debug_assert!(false, "ray {i} is queued for shading without a hit");
                         continue;
                     };
-                    let (h, it) = prepare_hit(scene, settings, hit, &rays.get(i));
+                    let mut h = HitItem::new(hit, &rays.get(i));
+                    let it = interaction(scene, &h);
+                    attenuate(scene, settings, &mut h, &it);
                     if it.surface.emission != Color::ZERO {
                         out.emit(h.path, h.throughput * it.surface.emission);
                     }
