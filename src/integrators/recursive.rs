@@ -634,12 +634,13 @@ pub fn render(
     if caustic::applicable(scene, settings, &cam) {
         let c = super::caustics::add_splats(scene, settings, &cam, &mut film, progress);
         counters.add(&c);
-    } else if let Some(p) = progress
-        && caustic::light_pass_rows(settings) > 0
-    {
+    } else if let Some(p) = progress {
         // Asked for, but nothing to trace (no mirror or glass, say): the
-        // pass is done.
-        p(caustic::light_pass_rows(settings));
+        // pass, if any, is done.
+        match caustic::light_pass_rows(settings) {
+            0 => {}
+            rows => p(rows),
+        }
     }
     (film, counters)
 }
