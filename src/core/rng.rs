@@ -52,6 +52,10 @@ pub struct Sampler {
     /// one `sample_4d` call (SIMD) serves four draws.
     cached_set: u32,
     cached: [f32; 4],
+    /// A second cached set, kept by [`Sampler::set_of_four_kept`] apart
+    /// from the one above, for a set read at several path vertices.
+    kept_set: u32,
+    kept: [f32; 4],
 }
 
 /// The hashed keys of one pixel sample's [`Sampler`], computed once: a
@@ -91,6 +95,8 @@ impl SamplerSeed {
             sobol: self.sobol,
             cached_set: u32::MAX,
             cached: [0.0; 4],
+            kept_set: u32::MAX,
+            kept: [0.0; 4],
         }
     }
 }
@@ -261,6 +267,8 @@ impl Sampler {
             sobol: self.sobol,
             cached_set: u32::MAX,
             cached: [0.0; 4],
+            kept_set: u32::MAX,
+            kept: [0.0; 4],
         }
     }
 
@@ -283,6 +291,27 @@ impl Sampler {
             let set = d / 4;
             self.cache_set(set);
             return self.cached;
+        }
+        std::array::from_fn(|k| self.hashed(d.wrapping_add(k as u32)))
+    }
+
+    /// The four numbers of dimensions `d .. d + 4` (`d` a multiple of four),
+    /// as [`Sampler::set_of_four`] gives them, but cached in a slot of
+    /// their own that the other draws do not replace: for a set read at
+    /// several vertices of a path (the BSDF directions of two consecutive
+    /// bounces, see [`crate::transport::path::direction_numbers`]) while
+    /// other sets are drawn in between. Leaves the current dimension as it
+    /// was.
+    #[inline]
+    pub fn set_of_four_kept(&mut self, d: u32) -> [f32; 4] {
+        debug_assert_eq!(d % 4, 0, "sets of four start at multiples of four");
+        if self.sobol {
+            let set = d / 4;
+            if set != self.kept_set {
+                self.kept = sobol_set(self.sample, Self::set_seed(self.pixel_key, set));
+                self.kept_set = set;
+            }
+            return self.kept;
         }
         std::array::from_fn(|k| self.hashed(d.wrapping_add(k as u32)))
     }
@@ -310,10 +339,15 @@ impl Sampler {
     #[inline(always)]
     fn cache_set(&mut self, set: u32) {
         if set != self.cached_set {
-            let seed = mix64(self.pixel_key ^ set as u64);
-            self.cached = sobol_set(self.sample, (seed >> 32) as u32);
+            self.cached = sobol_set(self.sample, Self::set_seed(self.pixel_key, set));
             self.cached_set = set;
         }
+    }
+
+    /// The scramble seed of Sobol set `set` of a pixel.
+    #[inline(always)]
+    fn set_seed(pixel_key: u64, set: u32) -> u32 {
+        (mix64(pixel_key ^ set as u64) >> 32) as u32
     }
 
     /// The hash sampler's number for dimension `d`.
@@ -463,6 +497,28 @@ mod tests {
                 let mut four = Sampler::with_kind(kind, 11, 77, sample);
                 assert_eq!(four.set_of_four(d), singles[..4], "{kind:?} {sample} {d}");
                 assert_eq!(four.next_f32(), singles[4], "{kind:?} {sample} {d}");
+            }
+        }
+    }
+
+    /// The kept set is the set `set_of_four` gives, bit for bit, wherever
+    /// the sampler stands and whatever it cached; it moves neither the
+    /// current dimension nor the other cache.
+    #[test]
+    fn a_kept_set_is_the_set_of_four() {
+        for kind in [SamplerKind::Sobol, SamplerKind::Hash] {
+            for (sample, d) in [(0u32, 0u32), (3, 4), (70_000, 8), (9, 0x2000_0010)] {
+                let expected = Sampler::with_kind(kind, 11, 77, sample).set_of_four(d);
+                let next = Sampler::with_kind(kind, 11, 77, sample).set_of_four(d + 4);
+                let mut s = Sampler::with_kind(kind, 11, 77, sample);
+                let _ = s.set_of_four(12);
+                let after = s.next_f32();
+                let mut s = Sampler::with_kind(kind, 11, 77, sample);
+                let _ = s.set_of_four(12);
+                assert_eq!(s.set_of_four_kept(d), expected, "{kind:?} {sample} {d}");
+                assert_eq!(s.set_of_four_kept(d + 4), next, "{kind:?} {sample} {d}");
+                assert_eq!(s.set_of_four_kept(d), expected, "{kind:?} {sample} {d}");
+                assert_eq!(s.next_f32(), after, "{kind:?} {sample} {d}");
             }
         }
     }

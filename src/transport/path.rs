@@ -287,11 +287,40 @@ pub fn weigh_wavelength(radiance: Color, lambda: Option<f32>) -> Color {
 /// together (its best pair is the first two of a set): the film position
 /// takes set 0 (`(x, y)` jitter, two spare); each bounce takes one set per
 /// light sample, `(point u, point v, which light, spare)`, and one for the
-/// BSDF, `(direction u, direction v, lobe, roulette)`.
+/// BSDF, `(medium, medium, lobe, roulette)`, whose first two numbers only
+/// a scattering event in a medium draws (see [`crate::transport::volume`]).
+/// A surface's BSDF direction comes from [`direction_numbers`] instead.
 #[inline]
 pub fn bounce_dimension(settings: &RenderSettings, depth: u32) -> u32 {
     let stride = 4 * (1 + settings.light_samples);
     4u32.wrapping_add(depth.wrapping_mul(stride))
+}
+
+/// First dimension of the sets that hold the BSDF directions of surface
+/// vertices: far above the bounces' own ([`bounce_dimension`] of the
+/// deepest bounce with the most light samples stays below it) and below
+/// the media's (`volume::medium_dimension`).
+pub const DIRECTION_DIMENSION: u32 = 0x2000_0000;
+
+/// The two numbers from which a surface vertex at bounce `depth` draws
+/// its BSDF direction. Bounces `2j` and `2j + 1` share one Sobol set of
+/// four: `(u, v)` of the first, then `(u, v)` of the second, so that the
+/// directions of consecutive bounces are stratified together, in four
+/// dimensions, rather than each pair on its own with a random pairing
+/// between them (Burley's padding, as the other sets have it). Light that
+/// bounces twice or more is two thirds of the Cornell box's error; this
+/// lowers its mean relative error by 3% at 64 and 5% at 256 samples per
+/// pixel (README, "Sampling"). The set is kept
+/// apart from the one-set cache ([`Sampler::set_of_four_kept`]), so the
+/// second bounce of a pair finds it without computing it again.
+#[inline]
+pub fn direction_numbers(sampler: &mut Sampler, depth: u32) -> Vec2 {
+    let set = sampler.set_of_four_kept(DIRECTION_DIMENSION.wrapping_add(4 * (depth / 2)));
+    if depth.is_multiple_of(2) {
+        Vec2::new(set[0], set[1])
+    } else {
+        Vec2::new(set[2], set[3])
+    }
 }
 
 /// Shadow rays of next-event estimation at a path vertex of bounce
@@ -605,17 +634,31 @@ pub fn continue_path(
     throughput: Color,
     sampler: &mut Sampler,
 ) -> Option<Continuation> {
-    let [ux, uy, u_lobe, u_rr] =
-        sampler.set_of_four(bounce_dimension(settings, depth) + 4 * settings.light_samples);
-    let u = Vec2::new(ux, uy);
     if depth >= settings.max_depth {
         return None;
     }
+    let u = direction_numbers(sampler, depth);
+    // The lobe and roulette numbers, drawn only when something reads them:
+    // a surface whose diffuse lobe has probability 1 (a Lambertian one, all
+    // of the Cornell box) chooses it for any number below 1, 0 included,
+    // and roulette reads its number only from its first bounce on. Every
+    // number is the same whether or not another was drawn.
+    let bsdf_set = bounce_dimension(settings, depth) + 4 * settings.light_samples;
+    let u_lobe = if lobes.diffuse == 1.0 {
+        0.0
+    } else {
+        sampler.set_of_four(bsdf_set)[2]
+    };
     let sample = sample_bsdf(it, lobes, u_lobe, u)?;
     let t = throughput * sample.weight;
     if max_component(t) < settings.min_contribution || !t.is_finite() {
         return None;
     }
+    let u_rr = if settings.rr_start_depth.is_some_and(|start| depth + 1 >= start) {
+        sampler.set_of_four(bsdf_set)[3]
+    } else {
+        0.0
+    };
     let scale = roulette(settings, depth + 1, t, u_rr)?;
     Some(Continuation { sample, scale })
 }
@@ -623,6 +666,62 @@ pub fn continue_path(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Whether the (u, v) of bounce `a` and of bounce `b`, over a pixel's
+    /// first 256 Sobol samples, form a (t, 8, 4)-net in base 2: exactly
+    /// `2^t` points in every box `[i1/2^e1, (i1+1)/2^e1) x ...` of the
+    /// four numbers with `e1 + e2 + e3 + e4 = 8 - t`.
+    fn is_net(pixel: u32, a: u32, b: u32, t: u32) -> bool {
+        use crate::core::rng::SamplerKind;
+        let points: Vec<[f32; 4]> = (0..256)
+            .map(|sample| {
+                let mut s = Sampler::with_kind(SamplerKind::Sobol, 7, pixel, sample);
+                let (p, q) = (direction_numbers(&mut s, a), direction_numbers(&mut s, b));
+                [p.x, p.y, q.x, q.y]
+            })
+            .collect();
+        for e in 0..8u32.pow(4) {
+            let e = [e % 8, e / 8 % 8, e / 64 % 8, e / 512];
+            if e.iter().sum::<u32>() != 8 - t {
+                continue;
+            }
+            let mut count = std::collections::HashMap::new();
+            for p in &points {
+                let cell: [u32; 4] =
+                    std::array::from_fn(|k| (p[k] * (1u32 << e[k]) as f32) as u32);
+                *count.entry(cell).or_insert(0u32) += 1;
+            }
+            if count.len() != (256 >> t) || count.values().any(|&c| c != 1 << t) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Bounces 2j and 2j + 1 draw their directions from one Sobol set, so
+    /// that the two directions are stratified together in four
+    /// dimensions; bounces in different sets are not.
+    #[test]
+    fn consecutive_bounces_draw_directions_stratified_together() {
+        // The first four Sobol dimensions form (3, m, 4)-nets (Owen
+        // scrambling keeps that): eight points in every box of volume 2^-5.
+        // Independently shuffled sets only stratify each pair on its own.
+        for pixel in [0, 1, 77, 12345] {
+            assert!(is_net(pixel, 0, 1, 3), "pixel {pixel}, bounces 0 and 1");
+            assert!(is_net(pixel, 6, 7, 3), "pixel {pixel}, bounces 6 and 7");
+            assert!(!is_net(pixel, 0, 2, 3), "pixel {pixel}, bounces 0 and 2");
+            assert!(!is_net(pixel, 1, 2, 4), "pixel {pixel}, bounces 1 and 2");
+        }
+        // The pair's numbers are one set's, in order, and the set is the
+        // same whether or not another set was drawn in between.
+        let mut s = Sampler::with_kind(crate::core::rng::SamplerKind::Sobol, 3, 9, 5);
+        let first = direction_numbers(&mut s, 4);
+        let _ = s.set_of_four(bounce_dimension(&RenderSettings::default(), 5));
+        let second = direction_numbers(&mut s, 5);
+        let set = Sampler::with_kind(crate::core::rng::SamplerKind::Sobol, 3, 9, 5)
+            .set_of_four(DIRECTION_DIMENSION + 8);
+        assert_eq!([first.x, first.y, second.x, second.y], set);
+    }
 
     #[test]
     fn roulette_keeps_the_expectation() {
