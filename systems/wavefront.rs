@@ -31,7 +31,7 @@ use bevy_ecs::system::SystemParam;
 
 use super::{Frame, RenderConfig, frame_preconditions};
 use crate::core::math::Color;
-use crate::core::rng::SamplerSeed;
+use crate::core::rng::{KeptSlot, SamplerSeed};
 use crate::core::settings::Style;
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -222,6 +222,11 @@ pub struct ShadowRays(pub ShadowSegments);
 #[derive(Resource, Default)]
 pub struct PathSeeds(pub Vec<SamplerSeed>);
 
+/// Each path's kept Sobol set between its bounces' shading passes (path
+/// transport only; see [`KeptSlot`]).
+#[derive(Resource, Default)]
+pub struct PathKeptSets(pub Vec<KeptSlot>);
+
 /// Wavelength of each path of the batch (spectral path transport only).
 #[derive(Resource, Default)]
 pub struct PathWavelengths(pub Vec<f32>);
@@ -371,6 +376,7 @@ pub fn add_wavefront_schedules(world: &mut World) {
     init_hit_queues(world);
     world.init_resource::<ShadowRays>();
     world.init_resource::<PathSeeds>();
+    world.init_resource::<PathKeptSets>();
     world.init_resource::<PathWavelengths>();
     world.init_resource::<PathRadiance>();
     world.init_resource::<PixelSums>();
@@ -396,11 +402,13 @@ pub fn shadows_possible(frame: Res<WavefrontFrame>, gating: Res<StageGating>) ->
 }
 
 /// Stage: camera rays for the batch's paths.
+#[allow(clippy::too_many_arguments)] // one resource per argument
 pub fn generate_camera_rays(
     config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     mut rays: ResMut<CurrentRays>,
     mut seeds: ResMut<PathSeeds>,
+    mut kept: ResMut<PathKeptSets>,
     mut wavelengths: ResMut<PathWavelengths>,
     mut radiance: ResMut<PathRadiance>,
     mut stats: ResMut<WavefrontStats>,
@@ -417,6 +425,7 @@ pub fn generate_camera_rays(
             count,
             &mut rays.0,
             &mut seeds.0,
+            &mut kept.0,
             &mut counters.rays,
         );
         kernels::path_wavelengths(&frame.scene, &config.settings, &seeds.0, &mut wavelengths.0);
@@ -524,6 +533,7 @@ pub struct ShadeParams<'w> {
     rays: Res<'w, CurrentRays>,
     found: Res<'w, BounceHits>,
     seeds: Res<'w, PathSeeds>,
+    kept: Res<'w, PathKeptSets>,
     wavelengths: Res<'w, PathWavelengths>,
     scratch: ResMut<'w, StageScratch>,
     radiance: ResMut<'w, PathRadiance>,
@@ -541,6 +551,7 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
         rays,
         found,
         seeds,
+        kept,
         wavelengths,
         mut scratch,
         mut radiance,
@@ -565,6 +576,7 @@ fn shade_stage<C: ClassMarker>(mut hits: ResMut<Hits<C>>, params: ShadeParams) {
                 hits: &hits.0,
                 seeds: &seeds.0,
                 wavelengths: &wavelengths.0,
+                kept: &kept.0,
             },
             &mut scratch.shading,
             to,

@@ -4,6 +4,8 @@
 //! dimension)`, so an image does not depend on the order in which pixels
 //! are rendered, on the thread count, or on the integrator's control flow.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 /// Which numbers a [`Sampler`] draws.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -56,6 +58,39 @@ pub struct Sampler {
     /// from the one above, for a set read at several path vertices.
     kept_set: u32,
     kept: [f32; 4],
+}
+
+/// A path's kept Sobol set ([`Sampler::kept`]) between two vertices
+/// shaded by different passes of a wavefront stage: written by the pass
+/// that shades the path's vertex (at most one per path per pass, so the
+/// relaxed atomics never race) and read by the next bounce's pass, after
+/// the stage boundary. Saves the second vertex of a direction pair
+/// ([`crate::transport::path::direction_numbers`]) a Sobol set.
+#[derive(Debug, Default)]
+pub struct KeptSlot([AtomicU32; 5]);
+
+impl KeptSlot {
+    /// The kept set, or none (`u32::MAX`) after [`KeptSlot::clear`].
+    #[inline]
+    pub fn load(&self) -> (u32, [f32; 4]) {
+        let v = |k: usize| f32::from_bits(self.0[k + 1].load(Ordering::Relaxed));
+        (self.0[0].load(Ordering::Relaxed), [v(0), v(1), v(2), v(3)])
+    }
+
+    /// Holds `kept` for the path's next vertex.
+    #[inline]
+    pub fn store(&self, (set, values): (u32, [f32; 4])) {
+        self.0[0].store(set, Ordering::Relaxed);
+        for (slot, v) in self.0[1..].iter().zip(values) {
+            slot.store(v.to_bits(), Ordering::Relaxed);
+        }
+    }
+
+    /// Holds no set: a new path starts here.
+    #[inline]
+    pub fn clear(&self) {
+        self.0[0].store(u32::MAX, Ordering::Relaxed);
+    }
 }
 
 /// The hashed keys of one pixel sample's [`Sampler`], computed once: a
@@ -314,6 +349,24 @@ impl Sampler {
             return self.kept;
         }
         std::array::from_fn(|k| self.hashed(d.wrapping_add(k as u32)))
+    }
+
+    /// The kept set (see [`Sampler::set_of_four_kept`]): its set number
+    /// (`u32::MAX`: none) and its four numbers, for a stage that makes
+    /// the path's sampler anew at every vertex to hand on
+    /// ([`KeptSlot`]).
+    #[inline]
+    pub fn kept(&self) -> (u32, [f32; 4]) {
+        (self.kept_set, self.kept)
+    }
+
+    /// Restores a kept set that [`Sampler::kept`] gave at an earlier
+    /// vertex of the same path (the same seed, pixel and sample, so the
+    /// same numbers `set_of_four_kept` would compute again).
+    #[inline]
+    pub fn restore_kept(&mut self, (set, values): (u32, [f32; 4])) {
+        self.kept_set = set;
+        self.kept = values;
     }
 
     /// The two numbers of dimensions `d` and `d + 1` (`d` even), then

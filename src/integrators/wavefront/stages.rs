@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::accel::packet::{LANES, LaneMask};
 use crate::core::math::{Color, Ray, RayCone, max_component, one_octant};
-use crate::core::rng::SamplerSeed;
+use crate::core::rng::{KeptSlot, SamplerSeed};
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -53,6 +53,7 @@ pub fn generate_camera_rays(
     count: usize,
     out: &mut RayQueue,
     seeds: &mut Vec<SamplerSeed>,
+    kept: &mut Vec<KeptSlot>,
     rays: &mut RayCounts,
 ) {
     let seed = |k: &crate::core::window::PathKey| {
@@ -70,7 +71,12 @@ pub fn generate_camera_rays(
     // keys are hashed once here, for the shading stages to start from.
     if settings.transport != Transport::Path {
         seeds.clear();
+        kept.clear();
     } else {
+        // Every path of the batch starts with no kept set (a slot holds
+        // the previous batch's path of the same index until cleared).
+        kept.resize_with(count, KeptSlot::default);
+        kept.par_iter().with_min_len(CHUNK).for_each(KeptSlot::clear);
         seeds.resize(count, SamplerSeed::default());
         seeds
             .par_chunks_mut(CHUNK)
@@ -458,6 +464,9 @@ pub struct ShadeInput<'a> {
     /// Wavelength of each path of the batch in spectral mode
     /// ([`path_wavelengths`]); empty otherwise.
     pub wavelengths: &'a [f32],
+    /// Each path's kept Sobol set, handed from one bounce's shading to the
+    /// next (path transport; empty otherwise).
+    pub kept: &'a [KeptSlot],
 }
 
 /// The interaction of the hit item `h` (built where it is kept: returned
@@ -873,7 +882,7 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
     scratch: &mut ShadeScratch,
     to: ShadeTargets<'_>,
 ) {
-    let (seeds, wavelengths) = (input.seeds, input.wavelengths);
+    let (seeds, wavelengths, kept) = (input.seeds, input.wavelengths, input.kept);
     shade_hits(scene, settings, input, scratch, to, |h, it, out| {
         let e = path::emitted(scene, settings, it, h.instance, h.pdf, h.distance);
         if e != Color::ZERO {
@@ -883,6 +892,10 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
             return;
         }
         let mut sampler = seeds[h.path as usize].sampler();
+        let slot = kept.get(h.path as usize);
+        if let Some(k) = slot {
+            sampler.restore_kept(k.load());
+        }
         let lambda = wavelengths.get(h.path as usize).copied();
         // The interaction is adjusted in place (a copy of it costs a
         // `memmove` per hit).
@@ -916,6 +929,9 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
                 cone: cont.cone(it),
             };
             out.push_secondary(cont.sample.kind, item);
+            if let Some(k) = slot {
+                k.store(sampler.kept());
+            }
         }
     });
 }
