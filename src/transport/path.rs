@@ -654,7 +654,10 @@ pub fn continue_path(
     if max_component(t) < settings.min_contribution || !t.is_finite() {
         return None;
     }
-    let u_rr = if settings.rr_start_depth.is_some_and(|start| depth + 1 >= start) {
+    let u_rr = if settings
+        .rr_start_depth
+        .is_some_and(|start| depth + 1 >= start)
+    {
         sampler.set_of_four(bsdf_set)[3]
     } else {
         0.0
@@ -687,8 +690,7 @@ mod tests {
             }
             let mut count = std::collections::HashMap::new();
             for p in &points {
-                let cell: [u32; 4] =
-                    std::array::from_fn(|k| (p[k] * (1u32 << e[k]) as f32) as u32);
+                let cell: [u32; 4] = std::array::from_fn(|k| (p[k] * (1u32 << e[k]) as f32) as u32);
                 *count.entry(cell).or_insert(0u32) += 1;
             }
             if count.len() != (256 >> t) || count.values().any(|&c| c != 1 << t) {

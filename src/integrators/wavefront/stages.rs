@@ -76,7 +76,9 @@ pub fn generate_camera_rays(
         // Every path of the batch starts with no kept set (a slot holds
         // the previous batch's path of the same index until cleared).
         kept.resize_with(count, KeptSlot::default);
-        kept.par_iter().with_min_len(CHUNK).for_each(KeptSlot::clear);
+        kept.par_iter()
+            .with_min_len(CHUNK)
+            .for_each(KeptSlot::clear);
         seeds.resize(count, SamplerSeed::default());
         seeds
             .par_chunks_mut(CHUNK)
