@@ -100,6 +100,32 @@ fn both_integrators_give_the_same_image_on_every_scene() {
     }
 }
 
+/// Under path transport the wavefront hands each path's kept direction
+/// set from one bounce's shading to the next through a slot per path
+/// index, which every batch must start empty: a path of the next batch
+/// with the same index would otherwise read the previous path's numbers.
+/// Batches of 1001 paths over an open scene (many paths end after a
+/// bounce or two, leaving their first pair's set behind) and the Cornell
+/// box, both integrators, the same image.
+#[test]
+fn path_traced_batches_start_with_their_own_numbers() {
+    for (scene, max_depth) in [("gltf/spheres.gltf", 6), ("cornell.toml", 4)] {
+        let path = assets().join(scene);
+        let s = RenderSettings {
+            transport: prism::core::settings::Transport::Path,
+            max_depth,
+            ..settings(48, 36, 4)
+        };
+        let rec = render(&path, IntegratorKind::Recursive, &s, 1001);
+        let wav = render(&path, IntegratorKind::Wavefront, &s, 1001);
+        assert_same_image(
+            rec.film.as_ref().unwrap(),
+            wav.film.as_ref().unwrap(),
+            scene,
+        );
+    }
+}
+
 /// Under Whitted transport a scene of `LANES_MIN_POINT_LIGHTS` (8) or more point lights shades
 /// its hits in lanes (eight hits of one material class, each light's
 /// shadow rays set up side by side: `shade_lit_in_lanes`); its image is
