@@ -310,9 +310,9 @@ pub const DIRECTION_DIMENSION: u32 = 0x2000_0000;
 /// between them (Burley's padding, as the other sets have it). Light that
 /// bounces twice or more is two thirds of the Cornell box's error; this
 /// lowers its mean relative error by 3% at 64 and 5% at 256 samples per
-/// pixel (README, "Sampling"). The set is kept
-/// apart from the one-set cache ([`Sampler::set_of_four_kept`]), so the
-/// second bounce of a pair finds it without computing it again.
+/// pixel (README, "Path transport", "Sampler"). The set is kept apart from
+/// the one-set cache ([`Sampler::set_of_four_kept`]), so the second
+/// bounce of a pair finds it without computing it again.
 #[inline]
 pub fn direction_numbers(sampler: &mut Sampler, depth: u32) -> Vec2 {
     let set = sampler.set_of_four_kept(DIRECTION_DIMENSION.wrapping_add(4 * (depth / 2)));

@@ -58,8 +58,11 @@
 //!
 //! # Random numbers
 //! A scattering event of bounce `b` reads bounce `b`'s sets of the path
-//! sampler ([`crate::transport::path::bounce_dimension`]) exactly as a
-//! surface vertex does. Distance and equiangular sampling on the segment
+//! sampler ([`crate::transport::path::bounce_dimension`]) as a surface
+//! vertex does, but for its direction: the phase function is sampled with
+//! the first pair of the bounce's BSDF set, which surfaces leave unused
+//! (they draw theirs from [`crate::transport::path::direction_numbers`]);
+//! the roulette number is where a surface's is. Distance and equiangular sampling on the segment
 //! that follows bounce `b` read sets of their own, one per boundary
 //! crossed, far above the bounces' ([`medium_dimension`]).
 
@@ -772,7 +775,8 @@ fn environment_sample(
 /// with `throughput`: a direction drawn from the phase function (weight
 /// one, density the phase function's), then the depth, contribution and
 /// roulette tests of [`continue_path`](crate::transport::path::continue_path),
-/// from the same sampler dimensions as a surface's.
+/// the roulette number from a surface's dimension (see the module
+/// notes on random numbers).
 pub fn continue_in_medium(
     settings: &RenderSettings,
     v: &MediumVertex,
