@@ -637,9 +637,9 @@ pub fn render(
     } else if let Some(p) = progress {
         // Asked for, but nothing to trace (no mirror or glass, say): the
         // pass, if any, is done.
-        match caustic::light_pass_rows(settings) {
-            0 => {}
-            rows => p(rows),
+        let rows = caustic::light_pass_rows(settings);
+        if rows > 0 {
+            p(rows);
         }
     }
     (film, counters)

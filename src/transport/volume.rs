@@ -62,9 +62,10 @@
 //! vertex does, but for its direction: the phase function is sampled with
 //! the first pair of the bounce's BSDF set, which surfaces leave unused
 //! (they draw theirs from [`crate::transport::path::direction_numbers`]);
-//! the roulette number is where a surface's is. Distance and equiangular sampling on the segment
-//! that follows bounce `b` read sets of their own, one per boundary
-//! crossed, far above the bounces' ([`medium_dimension`]).
+//! the roulette number is where a surface's is. Distance and equiangular
+//! sampling on the segment that follows bounce `b` read sets of their
+//! own, one per boundary crossed, far above the bounces'
+//! ([`medium_dimension`]).
 
 use glam::{Vec2, Vec3A};
 
