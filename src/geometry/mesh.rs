@@ -320,6 +320,13 @@ impl Mesh {
         self.corners[i]
     }
 
+    /// The triangles as the leaf tests read them, one [`Tri8`] block per
+    /// BVH leaf (every triangle in exactly one), when the mesh has a BVH.
+    #[inline]
+    pub(crate) fn leaf_blocks(&self) -> Option<&[Tri8]> {
+        matches!(self.structure, Structure::Bvh).then_some(&self.blocks[..])
+    }
+
     /// True when the BVH is one leaf (at most eight triangles, as the
     /// quads and panels of simple scenes are). Single rays then test its
     /// triangles at once instead of traversing: the traversal would only

@@ -592,7 +592,7 @@ impl WatertightRay {
     /// rounding bounds `b`: `(t, b1, b2)` for a hit inside `(t_min,
     /// t_max)`. Shared by the lane-by-lane and the lane-major leaf tests.
     #[inline(always)]
-    fn finish_one(
+    pub(crate) fn finish_one(
         &self,
         p: [Vec3A; 3],
         uvw: [f32; 3],
@@ -1035,6 +1035,209 @@ unsafe fn edges_lanes16_avx512(
             [u, v, w].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
             [b0, b1, b2].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
         )
+    }
+}
+
+/// Up to 16 rays that share one axis permutation (the `k` of their
+/// [`WatertightRay`]s), lane by lane: each ray's origin along the permuted
+/// axes and its shears. Rays of any origins and directions can test one
+/// triangle side by side once their permutation is the same, since the
+/// triangle's permuted coordinates are then one value for every lane
+/// ([`PermutedLanes16::edges`]).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct PermutedLanes16 {
+    /// `o[axis][lane]`: the origin along `kx`, `ky`, `kz`.
+    o: [[f32; 16]; 3],
+    sx: [f32; 16],
+    sy: [f32; 16],
+    /// The permutation shared by every lane.
+    k: [u8; 3],
+}
+
+impl WatertightRay {
+    /// A key for the ray's axis permutation (one of six values below 9):
+    /// rays with equal keys can share a [`PermutedLanes16`].
+    #[inline(always)]
+    pub fn permutation_key(&self) -> usize {
+        self.k[0] as usize * 3 + self.k[1] as usize
+    }
+}
+
+impl PermutedLanes16 {
+    /// The lanes of `rays[group[l]]` (`group`: 1 to 16 indices, all of
+    /// rays with one [`WatertightRay::permutation_key`]); lanes past
+    /// `group.len()` repeat the last ray.
+    #[inline(always)]
+    pub fn new(rays: &[WatertightRay], group: &[u32]) -> Self {
+        debug_assert!(!group.is_empty() && group.len() <= 16);
+        let first = &rays[group[0] as usize];
+        debug_assert!(group.iter().all(|&i| rays[i as usize].k == first.k));
+        let mut s = PermutedLanes16 {
+            o: [[0.0; 16]; 3],
+            sx: [0.0; 16],
+            sy: [0.0; 16],
+            k: first.k,
+        };
+        for l in 0..16 {
+            let r = &rays[group[l.min(group.len() - 1)] as usize];
+            for a in 0..3 {
+                s.o[a][l] = r.o_k[a];
+            }
+            s.sx[l] = r.shear.x;
+            s.sy[l] = r.shear.y;
+        }
+        s
+    }
+
+    /// Triangle `j` of `block` against all 16 lanes: the lanes whose edge
+    /// test passed or needs the re-check, with the edge functions and
+    /// their rounding bounds, lane by lane exactly the operations of
+    /// [`WatertightRay::intersect8`] (so the same bits; the caller
+    /// finishes those lanes with [`WatertightRay::finish_one`]). With
+    /// `AVX512` (only inside an AVX-512 entry point, see
+    /// [`crate::core::simd`]) in 16-wide registers; otherwise plain loops
+    /// over the lanes, which the AVX2 entry points compile to 8-wide ones.
+    #[inline(always)]
+    pub fn edges<const AVX512: bool>(
+        &self,
+        block: &Tri8,
+        j: usize,
+    ) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+        let [kx, ky, kz] = self.k.map(usize::from);
+        let p: [[f32; 3]; 3] =
+            std::array::from_fn(|vi| [block.v[vi][kx][j], block.v[vi][ky][j], block.v[vi][kz][j]]);
+        #[cfg(target_arch = "x86_64")]
+        if AVX512 {
+            // SAFETY: `AVX512` is set only by the AVX-512 entry points,
+            // which run only on CPUs with AVX-512F (`simd::use_avx512`).
+            #[allow(unsafe_code)]
+            return unsafe { self.edges_avx512(&p) };
+        }
+        self.edges_lanes(&p)
+    }
+
+    /// [`Self::edges`] as plain loops over the lanes.
+    #[inline(always)]
+    fn edges_lanes(&self, p: &[[f32; 3]; 3]) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+        // `maxps`: the second operand unless the first is greater, as
+        // `max4` and the AVX maxima of the leaf tests.
+        #[inline(always)]
+        fn max(a: f32, b: f32) -> f32 {
+            if a > b { a } else { b }
+        }
+        let tol = 8.0 * f32::EPSILON;
+        let mut e = [[0.0f32; 16]; 3];
+        let mut bound = [[0.0f32; 16]; 3];
+        let mut lanes = 0;
+        for l in 0..16 {
+            let (sx, sy) = (self.sx[l], self.sy[l]);
+            let (ox, oy, oz) = (self.o[0][l], self.o[1][l], self.o[2][l]);
+            let vertex = |vi: usize| {
+                let rx = p[vi][0] - ox;
+                let ry = p[vi][1] - oy;
+                let rz = p[vi][2] - oz;
+                let x = rx - sx * rz;
+                let y = ry - sy * rz;
+                let mag = max(max(rx.abs(), ry.abs()), rz.abs());
+                (x, y, mag, x.abs() + y.abs())
+            };
+            let (ax, ay, ma, sa) = vertex(0);
+            let (bx, by, mb, sb) = vertex(1);
+            let (cx, cy, mc, sc) = vertex(2);
+            let b = [
+                tol * max(mb, mc) * (sb + sc),
+                tol * max(mc, ma) * (sc + sa),
+                tol * max(ma, mb) * (sa + sb),
+            ];
+            let u = cx * by - cy * bx;
+            let v = ax * cy - ay * cx;
+            let w = bx * ay - by * ax;
+            let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
+            let negative = u < 0.0 || v < 0.0 || w < 0.0;
+            let positive = u > 0.0 || v > 0.0 || w > 0.0;
+            lanes |= (!(clean && negative && positive) as u32) << l;
+            e[0][l] = u;
+            e[1][l] = v;
+            e[2][l] = w;
+            for k in 0..3 {
+                bound[k][l] = b[k];
+            }
+        }
+        (lanes, e, bound)
+    }
+
+    /// [`Self::edges`] in 16-wide AVX-512 registers: the same operations.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn edges_avx512(&self, p: &[[f32; 3]; 3]) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+        // SAFETY: the caller runs on a CPU with AVX-512F.
+        unsafe {
+            use std::arch::x86_64::*;
+            let load = {
+                #[inline(always)]
+                |x: &[f32; 16]| _mm512_load_ps(x.as_ptr())
+            };
+            let (ox, oy, oz) = (load(&self.o[0]), load(&self.o[1]), load(&self.o[2]));
+            let (sx, sy) = (load(&self.sx), load(&self.sy));
+            let abs = {
+                #[inline(always)]
+                |x: __m512| _mm512_abs_ps(x)
+            };
+            let vertex = {
+                #[inline(always)]
+                |vi: usize| {
+                    let rx = _mm512_sub_ps(_mm512_set1_ps(p[vi][0]), ox);
+                    let ry = _mm512_sub_ps(_mm512_set1_ps(p[vi][1]), oy);
+                    let rz = _mm512_sub_ps(_mm512_set1_ps(p[vi][2]), oz);
+                    let x = _mm512_sub_ps(rx, _mm512_mul_ps(sx, rz));
+                    let y = _mm512_sub_ps(ry, _mm512_mul_ps(sy, rz));
+                    let mag = _mm512_max_ps(_mm512_max_ps(abs(rx), abs(ry)), abs(rz));
+                    (x, y, mag, _mm512_add_ps(abs(x), abs(y)))
+                }
+            };
+            let (ax, ay, ma, sa) = vertex(0);
+            let (bx, by, mb, sb) = vertex(1);
+            let (cx, cy, mc, sc) = vertex(2);
+            let tol = _mm512_set1_ps(8.0 * f32::EPSILON);
+            let bound = {
+                #[inline(always)]
+                |m1: __m512, m2: __m512, s1: __m512, s2: __m512| {
+                    _mm512_mul_ps(
+                        _mm512_mul_ps(tol, _mm512_max_ps(m1, m2)),
+                        _mm512_add_ps(s1, s2),
+                    )
+                }
+            };
+            let b0 = bound(mb, mc, sb, sc);
+            let b1 = bound(mc, ma, sc, sa);
+            let b2 = bound(ma, mb, sa, sb);
+            let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+            let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+            let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+            let gt = {
+                #[inline(always)]
+                |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, b)
+            };
+            let lt = {
+                #[inline(always)]
+                |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b)
+            };
+            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
+            let zero = _mm512_setzero_ps();
+            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
+            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
+            let lanes = (!clean | !(negative & positive)) as u32;
+            (
+                lanes,
+                [u, v, w].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
+                [b0, b1, b2].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
+            )
+        }
     }
 }
 

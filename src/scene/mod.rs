@@ -14,6 +14,7 @@ pub mod panorama;
 pub mod polygons;
 pub mod query;
 pub mod render_scene;
+pub mod triangles;
 pub mod update;
 
 pub use instance::{Hit, Instance, InstanceGeometry};

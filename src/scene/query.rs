@@ -882,6 +882,14 @@ impl RenderScene {
     }
 
     pub(super) fn finish_hit(&self, t: f32, index: u32, local: LocalHit) -> Hit {
+        self.finish_hit_inline(t, index, local)
+    }
+
+    /// [`Self::finish_hit`] inlined into its caller, which can then build
+    /// the hit where it keeps it (the wavefront's hit slots) instead of
+    /// copying it out of a returned value.
+    #[inline(always)]
+    pub(super) fn finish_hit_inline(&self, t: f32, index: u32, local: LocalHit) -> Hit {
         // A hit on the merged group becomes one on the instance it merged.
         let (index, local) = match (&self.merged, local) {
             (Some(g), LocalHit::Mesh(h)) if index == MERGED => {

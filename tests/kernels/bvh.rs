@@ -1089,3 +1089,247 @@ fn merging_needs_every_bounded_instance() {
     one.truncate(1);
     assert_eq!(merged(one), 0, "a single instance");
 }
+
+/// A box of two triangles per face (shared corners, coplanar pairs).
+fn cube() -> Mesh {
+    let mut data = MeshData::default();
+    for i in 0..8u32 {
+        let c = |b: u32| if i >> b & 1 == 1 { 1.0 } else { -1.0 };
+        data.positions.push(Vec3::new(c(0), c(1), c(2)));
+    }
+    for [a, b, c, d] in [
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+    ] {
+        data.indices.push([a, b, c]);
+        data.indices.push([a, c, d]);
+    }
+    Mesh::new("cube", data, NormalMode::Flat, BuildQuality::Medium).unwrap()
+}
+
+/// The wavefront's batched test of a small merged mesh
+/// (`scene::triangles`) gives every ray the hit the per-ray query gives,
+/// bit for bit (`t`, point, normals, `uv`, instance), and every segment
+/// the same occlusion, on the portable, AVX2 and AVX-512 paths: four
+/// merged meshes (two boxes, a quad, a coarse sphere: 50 triangles) under
+/// random transforms with scale and shear, and an axis-aligned box (62
+/// triangles in all), near the origin and 3e4 away from it, with rays
+/// aimed at corners (where coplanar neighbours tie and the batch hands
+/// the ray to the per-ray query), rays leaving surface points in random
+/// directions, axis-aligned rays with signed zeros, and rays running in
+/// the planes of the axis-aligned box's faces (a zero direction
+/// component, at the edge of its triangles' boxes: the padding of the
+/// boxes that skip triangles keeps their hits on its edges).
+#[test]
+fn batched_triangles_give_the_per_ray_hits() {
+    use prism::core::simd::{self, Isa};
+    use prism::scene::triangles::TriangleBatch;
+    let mut rng = Rng::new(77);
+    let mut pick = crate::common::rng::SplitMix64(3);
+    let quad = || {
+        let mut quad = MeshData::default();
+        quad.positions = vec![
+            Vec3::new(-3.0, 0.0, -3.0),
+            Vec3::new(3.0, 0.0, -3.0),
+            Vec3::new(3.0, 0.0, 3.0),
+            Vec3::new(-3.0, 0.0, 3.0),
+        ];
+        quad.indices = vec![[0, 1, 2], [0, 2, 3]];
+        Mesh::new("quad", quad, NormalMode::Flat, BuildQuality::Medium).unwrap()
+    };
+    let (mut hits, mut blocked) = (0, 0);
+    for offset in [Vec3::ZERO, Vec3::new(3.0e4, -2.0e4, 1.0e4)] {
+        let mut instances: Vec<Instance> = [cube(), cube(), quad(), uv_sphere(4, 3)]
+            .into_iter()
+            .map(|m| {
+                let t = Transform::from_trs_f32(
+                    offset + rng.vec(-2.5, 2.5),
+                    Quat::from_axis_angle(rng.dir(), rng.range(0.0, 2.0 * PI)),
+                    Vec3::new(
+                        rng.range(0.3, 2.0),
+                        rng.range(0.3, 2.0),
+                        rng.range(0.3, 2.0),
+                    ),
+                );
+                Instance::new(InstanceGeometry::Mesh(Arc::new(m)), &t, 0)
+            })
+            .collect();
+        // An axis-aligned cube at an exact place, for rays that run in the
+        // planes of its faces and meet its edges on the triangles' boxes.
+        let centre = offset + Vec3::new(0.0, 6.0, 0.0);
+        instances.push(Instance::new(
+            InstanceGeometry::Mesh(Arc::new(cube())),
+            &Transform::from_translation(centre.as_dvec3()),
+            0,
+        ));
+        let corners: Vec<Vec3A> = instances
+            .iter()
+            .flat_map(|inst| {
+                let InstanceGeometry::Mesh(m) = &inst.geometry else {
+                    unreachable!()
+                };
+                let to_world = inst.transform.to_world;
+                (0..m.triangle_count())
+                    .flat_map(|i| m.triangle(i))
+                    .map(move |p| to_world.transform_point3a(p))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let mut scene = RenderScene::new(
+            instances,
+            vec![Material::default()],
+            vec![],
+            Vec3::ZERO,
+            BuildQuality::Medium,
+        );
+        scene.set_mesh_merging(true);
+        scene.commit();
+        assert_eq!(scene.merged_instances(), 5);
+        let o = Vec3A::from(offset);
+        let mut rays = Vec::new();
+        let mut t_max = Vec::new();
+        for k in 0..3000 {
+            let ray = match k % 5 {
+                // In the plane of a face of the axis-aligned cube (a zero
+                // direction component), towards its edges.
+                4 => {
+                    let a = pick.below(3);
+                    let mut o = Vec3A::from(centre) + Vec3A::from(rng.vec(-3.0, 3.0));
+                    o[a] = centre[a] + if rng.f32() < 0.5 { 1.0 } else { -1.0 };
+                    let mut d = Vec3A::from(centre) + Vec3A::from(rng.vec(-1.2, 1.2)) - o;
+                    d[a] = if rng.f32() < 0.5 { 0.0 } else { -0.0 };
+                    Ray::new(o, d)
+                }
+                // From a random point or the centre towards a corner.
+                0 => {
+                    let from = o + Vec3A::from(rng.vec(-6.0, 6.0));
+                    Ray::new(from, corners[pick.below(corners.len())] - from)
+                }
+                1 => Ray::new(o, corners[pick.below(corners.len())] - o),
+                // From a point on a triangle, anywhere.
+                2 => {
+                    let t = 3 * (pick.below(corners.len()) / 3);
+                    let (a, b, c) = (corners[t], corners[t + 1], corners[t + 2]);
+                    let (u, v) = (rng.range(0.0, 1.0), rng.range(0.0, 1.0));
+                    let (u, v) = if u + v > 1.0 {
+                        (1.0 - u, 1.0 - v)
+                    } else {
+                        (u, v)
+                    };
+                    Ray::new(a + (b - a) * u + (c - a) * v, Vec3A::from(rng.dir()))
+                }
+                // Axis-aligned, with signed zeros.
+                _ => {
+                    let mut d = Vec3A::ZERO;
+                    let a = pick.below(3);
+                    d[a] = if rng.f32() < 0.5 { 1.0 } else { -1.0 };
+                    d[(a + 1) % 3] = if rng.f32() < 0.5 { 0.0 } else { -0.0 };
+                    Ray::new(o + Vec3A::from(rng.vec(-4.0, 4.0)), d)
+                }
+            };
+            rays.push(ray);
+            t_max.push(if k % 5 == 0 {
+                f32::INFINITY
+            } else {
+                rng.range(0.0, 8.0)
+            });
+        }
+        let want: Vec<String> = rays
+            .iter()
+            .map(|r| format!("{:?}", scene.intersect(r, 0.0, f32::INFINITY)))
+            .collect();
+        let occluded: Vec<bool> = rays
+            .iter()
+            .zip(&t_max)
+            .map(|(r, &t)| scene.occluded(r, 0.0, t))
+            .collect();
+        hits += want.iter().filter(|h| *h != "None").count();
+        blocked += occluded.iter().filter(|&&b| b).count();
+        for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512] {
+            if !simd::force(isa) {
+                eprintln!("{} path skipped: not on this CPU", isa.name());
+                continue;
+            }
+            let batch = TriangleBatch::new(&scene).expect("one small merged mesh");
+            // Calls of several sizes, as the wavefront's chunks and
+            // shadow groups make them.
+            for size in [1, 7, 16, 100, 3000] {
+                let mut got = vec![None; rays.len()];
+                let mut got_blocked = vec![false; rays.len()];
+                for (k, (r, t)) in rays.chunks(size).zip(t_max.chunks(size)).enumerate() {
+                    let at = k * size;
+                    batch.intersect(r, &mut got[at..at + r.len()]);
+                    batch.occluded(r, t, &mut got_blocked[at..at + r.len()]);
+                }
+                for (i, ray) in rays.iter().enumerate() {
+                    assert_eq!(
+                        format!("{:?}", got[i]),
+                        want[i],
+                        "{} path, calls of {size}: {ray:?}",
+                        isa.name()
+                    );
+                    assert_eq!(
+                        got_blocked[i],
+                        occluded[i],
+                        "{} path, calls of {size}: {ray:?} to {}",
+                        isa.name(),
+                        t_max[i]
+                    );
+                }
+            }
+        }
+        simd::force(simd::detected());
+    }
+    eprintln!("{hits} hits, {blocked} blocked");
+    assert!(
+        hits > 3000 && blocked > 1000,
+        "{hits} hits, {blocked} blocked"
+    );
+}
+
+/// The batched triangle test takes only scenes that are one merged mesh
+/// of a few dozen triangles: not more triangles, not a shape beside the
+/// mesh, not unmerged meshes.
+#[test]
+fn batched_triangles_only_for_one_small_merged_mesh() {
+    use prism::scene::triangles::{MAX_TRIANGLES, TriangleBatch};
+    let mut rng = Rng::new(5);
+    let scene = |meshes: Vec<Mesh>, plane: bool, merge: bool, rng: &mut Rng| {
+        let mut instances: Vec<Instance> = meshes
+            .into_iter()
+            .map(|m| {
+                Instance::new(
+                    InstanceGeometry::Mesh(Arc::new(m)),
+                    &random_transform(rng, 3.0),
+                    0,
+                )
+            })
+            .collect();
+        if plane {
+            instances.push(Instance::new(
+                InstanceGeometry::Shape(Shape::Plane),
+                &Transform::from_translation(glam::DVec3::new(0.0, -7.0, 0.0)),
+                0,
+            ));
+        }
+        let mut s = RenderScene::new(
+            instances,
+            vec![Material::default()],
+            vec![],
+            Vec3::ZERO,
+            BuildQuality::Medium,
+        );
+        s.set_mesh_merging(merge);
+        s.commit();
+        s
+    };
+    assert!(TriangleBatch::new(&scene(vec![cube(), cube()], false, true, &mut rng)).is_some());
+    assert!(TriangleBatch::new(&scene(vec![cube(), cube()], true, true, &mut rng)).is_none());
+    assert!(TriangleBatch::new(&scene(vec![cube(), cube()], false, false, &mut rng)).is_none());
+    let big = soup(&mut rng, MAX_TRIANGLES);
+    assert!(TriangleBatch::new(&scene(vec![big, cube()], false, true, &mut rng)).is_none());
+}

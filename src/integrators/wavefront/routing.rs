@@ -153,6 +153,30 @@ impl ShadeOutput {
         self.hit_ends.clear();
     }
 
+    /// Traces the shadow rays of the group of hits shaded since the last
+    /// call all at once: `occluded(rays, t_max, blocked)` sets
+    /// `blocked[j]` for each ray `j` of the group, in queue order (for
+    /// [`crate::scene::triangles::TriangleBatch`], which sorts them
+    /// itself). The radiance of the unblocked rays is kept as
+    /// [`ShadeOutput::trace_shadows`] keeps it.
+    pub fn trace_shadows_all(&mut self, occluded: impl Fn(&[Ray], &[f32], &mut [bool])) {
+        let n = self.shadows.len();
+        if n > 0 {
+            let q = &self.shadows;
+            let rays: Vec<Ray> = (0..n).map(|j| q.ray(j)).collect();
+            self.visible.clear();
+            self.visible.resize(n, false);
+            occluded(&rays, &q.t_max[..n], &mut self.visible);
+            for (j, &blocked) in self.visible.iter().enumerate() {
+                if !blocked {
+                    self.lit.push(q.path[j], q.radiance[j]);
+                }
+            }
+        }
+        self.shadows.clear();
+        self.hit_ends.clear();
+    }
+
     /// Traces the shadow rays pushed since the last call one at a time,
     /// in order, through the media they cross: `transmittance` gives each
     /// ray's, and the radiance of the rays that bring any back is kept for
