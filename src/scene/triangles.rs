@@ -167,6 +167,7 @@ impl Rays16 {
             return unsafe { self.crossing_avx512(lo, hi, t_hi) };
         }
         let mut lanes = 0;
+        #[allow(clippy::needless_range_loop)] // l indexes lanes of several arrays
         for l in 0..WIDTH {
             let mut near = f32::NEG_INFINITY;
             let mut far = f32::INFINITY;
@@ -203,6 +204,7 @@ impl Rays16 {
             return unsafe { self.crossing_plane_avx512(n, p, t_hi) };
         }
         let mut lanes = 0;
+        #[allow(clippy::needless_range_loop)] // l indexes lanes of several arrays
         for l in 0..WIDTH {
             let r = [
                 p[0] - self.o[0][l],

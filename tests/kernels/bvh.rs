@@ -1131,14 +1131,16 @@ fn batched_triangles_give_the_per_ray_hits() {
     let mut rng = Rng::new(77);
     let mut pick = crate::common::rng::SplitMix64(3);
     let quad = || {
-        let mut quad = MeshData::default();
-        quad.positions = vec![
-            Vec3::new(-3.0, 0.0, -3.0),
-            Vec3::new(3.0, 0.0, -3.0),
-            Vec3::new(3.0, 0.0, 3.0),
-            Vec3::new(-3.0, 0.0, 3.0),
-        ];
-        quad.indices = vec![[0, 1, 2], [0, 2, 3]];
+        let quad = MeshData {
+            positions: vec![
+                Vec3::new(-3.0, 0.0, -3.0),
+                Vec3::new(3.0, 0.0, -3.0),
+                Vec3::new(3.0, 0.0, 3.0),
+                Vec3::new(-3.0, 0.0, 3.0),
+            ],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            ..MeshData::default()
+        };
         Mesh::new("quad", quad, NormalMode::Flat, BuildQuality::Medium).unwrap()
     };
     let (mut hits, mut blocked) = (0, 0);
