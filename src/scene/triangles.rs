@@ -42,8 +42,10 @@ use crate::scene::merged::MERGED;
 use crate::scene::render_scene::RenderScene;
 
 /// Merged meshes of at most this many triangles are tested in batches.
-/// Every ray pays for every triangle, so beyond a few dozen the BVH,
-/// which skips most of them, costs less.
+/// Every group of rays pays at least the box test of every triangle, so
+/// beyond some size the BVH, which skips whole subtrees, costs less. Only
+/// the Cornell box's 38 triangles were measured; the limit is a guess
+/// above it.
 pub const MAX_TRIANGLES: usize = 64;
 
 /// Rays side by side.
@@ -115,9 +117,9 @@ impl Sorted {
     }
 }
 
-/// Origins and inverse directions of up to 16 rays, one array per
-/// coordinate, for the box test that skips triangles before their edge
-/// test.
+/// Origins, directions and inverse directions of up to 16 rays, one
+/// array per coordinate, for the box and plane tests that skip lanes
+/// before a triangle's edge test.
 struct Rays16 {
     o: [[f32; WIDTH]; 3],
     d: [[f32; WIDTH]; 3],
