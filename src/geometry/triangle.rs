@@ -577,9 +577,7 @@ impl WatertightRay {
         while lanes != 0 {
             let l = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let uvw = [e[0][l], e[1][l], e[2][l]];
-            let b = [bound[0][l], bound[1][l], bound[2][l]];
-            if let Some((t, b1, b2)) = self.finish_one(corners(l), uvw, b, t_min, *t_max) {
+            if let Some((t, b1, b2)) = self.finish_lane(corners(l), e, bound, l, t_min, *t_max) {
                 *t_max = t;
                 best = Some((l as u32, t, b1, b2));
             }
@@ -587,12 +585,29 @@ impl WatertightRay {
         best
     }
 
+    /// [`Self::finish_one`] for lane `l` of edge functions `e` and bounds
+    /// `bound` computed side by side (lanes of triangles or of rays).
+    #[inline(always)]
+    pub(crate) fn finish_lane<const N: usize>(
+        &self,
+        p: [Vec3A; 3],
+        e: &[[f32; N]; 3],
+        bound: &[[f32; N]; 3],
+        l: usize,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let uvw = [e[0][l], e[1][l], e[2][l]];
+        let b = [bound[0][l], bound[1][l], bound[2][l]];
+        self.finish_one(p, uvw, b, t_min, t_max)
+    }
+
     /// The end of the test of one triangle `p` whose edge test passed or
     /// needs the re-check, from its edge functions `uvw` and their
     /// rounding bounds `b`: `(t, b1, b2)` for a hit inside `(t_min,
     /// t_max)`. Shared by the lane-by-lane and the lane-major leaf tests.
     #[inline(always)]
-    pub(crate) fn finish_one(
+    fn finish_one(
         &self,
         p: [Vec3A; 3],
         uvw: [f32; 3],
@@ -921,9 +936,8 @@ impl WatertightRay {
             while pass != 0 {
                 let l = pass.trailing_zeros() as usize;
                 pass &= pass - 1;
-                let uvw = [e[0][l], e[1][l], e[2][l]];
-                let bl = [b[0][l], b[1][l], b[2][l]];
-                if let Some((t, b1, b2)) = rays[l].finish_one(corners, uvw, bl, t_min[l], t_max[l])
+                if let Some((t, b1, b2)) =
+                    rays[l].finish_lane(corners, &e, &b, l, t_min[l], t_max[l])
                 {
                     t_max[l] = t;
                     out[l] = (j as u32, t, b1, b2);
@@ -960,21 +974,36 @@ fn edges_lanes16(
         let (bx, by, sb) = vertex(1);
         let (cx, cy, sc) = vertex(2);
         let b = [tm[0] * (sb + sc), tm[1] * (sc + sa), tm[2] * (sa + sb)];
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
-        let negative = u < 0.0 || v < 0.0 || w < 0.0;
-        let positive = u > 0.0 || v > 0.0 || w > 0.0;
-        lanes |= (!(clean && negative && positive) as u32) << l;
-        e[0][l] = u;
-        e[1][l] = v;
-        e[2][l] = w;
-        for k in 0..3 {
-            bound[k][l] = b[k];
-        }
+        lanes |= edge_lane([(ax, ay), (bx, by), (cx, cy)], b, l, &mut e, &mut bound);
     }
     (lanes, e, bound)
+}
+
+/// One lane of [`edge_lanes4`]: the edge functions `u, v, w` from the
+/// sheared vertices `(x, y)`, stored with their rounding bounds `b` in
+/// lane `l` of `e` and `bound`; returns lane `l`'s bit when the edge test
+/// passed (all signs alike) or needs the re-check (some edge within its
+/// bound). The same operations, so the same bits.
+#[inline(always)]
+fn edge_lane(
+    xy: [(f32, f32); 3],
+    b: [f32; 3],
+    l: usize,
+    e: &mut [[f32; 16]; 3],
+    bound: &mut [[f32; 16]; 3],
+) -> u32 {
+    let [(ax, ay), (bx, by), (cx, cy)] = xy;
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
+    let negative = u < 0.0 || v < 0.0 || w < 0.0;
+    let positive = u > 0.0 || v > 0.0 || w > 0.0;
+    for (k, x) in [u, v, w].into_iter().enumerate() {
+        e[k][l] = x;
+        bound[k][l] = b[k];
+    }
+    (!(clean && negative && positive) as u32) << l
 }
 
 /// [`edges_lanes16`] in 16-wide AVX-512 registers: the same operations.
@@ -1014,6 +1043,26 @@ unsafe fn edges_lanes16_avx512(
         let b0 = _mm512_mul_ps(_mm512_set1_ps(tm[0]), _mm512_add_ps(sb, sc));
         let b1 = _mm512_mul_ps(_mm512_set1_ps(tm[1]), _mm512_add_ps(sc, sa));
         let b2 = _mm512_mul_ps(_mm512_set1_ps(tm[2]), _mm512_add_ps(sa, sb));
+        edge_lanes16_avx512([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
+    }
+}
+
+/// [`edge_lanes4`] for sixteen lanes in AVX-512 registers: the same
+/// operations.
+///
+/// # Safety
+/// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn edge_lanes16_avx512(
+    xy: [(std::arch::x86_64::__m512, std::arch::x86_64::__m512); 3],
+    b: [std::arch::x86_64::__m512; 3],
+) -> (u32, [[f32; 16]; 3], [[f32; 16]; 3]) {
+    // SAFETY: the caller runs on a CPU with AVX-512F.
+    unsafe {
+        use std::arch::x86_64::*;
+        let [(ax, ay), (bx, by), (cx, cy)] = xy;
         let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
         let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
         let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
@@ -1025,7 +1074,8 @@ unsafe fn edges_lanes16_avx512(
             #[inline(always)]
             |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b)
         };
-        let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
+        let clean =
+            gt(_mm512_abs_ps(u), b[0]) & gt(_mm512_abs_ps(v), b[1]) & gt(_mm512_abs_ps(w), b[2]);
         let zero = _mm512_setzero_ps();
         let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
         let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
@@ -1033,7 +1083,7 @@ unsafe fn edges_lanes16_avx512(
         (
             lanes,
             [u, v, w].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
-            [b0, b1, b2].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
+            b.map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
         )
     }
 }
@@ -1094,7 +1144,7 @@ impl PermutedLanes16 {
     /// test passed or needs the re-check, with the edge functions and
     /// their rounding bounds, lane by lane exactly the operations of
     /// [`WatertightRay::intersect8`] (so the same bits; the caller
-    /// finishes those lanes with [`WatertightRay::finish_one`]). With
+    /// finishes those lanes with [`WatertightRay::finish_lane`]). With
     /// `AVX512` (only inside an AVX-512 entry point, see
     /// [`crate::core::simd`]) in 16-wide registers; otherwise plain loops
     /// over the lanes, which the AVX2 entry points compile to 8-wide ones.
@@ -1150,19 +1200,7 @@ impl PermutedLanes16 {
                 tol * max(mc, ma) * (sc + sa),
                 tol * max(ma, mb) * (sa + sb),
             ];
-            let u = cx * by - cy * bx;
-            let v = ax * cy - ay * cx;
-            let w = bx * ay - by * ax;
-            let clean = u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2];
-            let negative = u < 0.0 || v < 0.0 || w < 0.0;
-            let positive = u > 0.0 || v > 0.0 || w > 0.0;
-            lanes |= (!(clean && negative && positive) as u32) << l;
-            e[0][l] = u;
-            e[1][l] = v;
-            e[2][l] = w;
-            for k in 0..3 {
-                bound[k][l] = b[k];
-            }
+            lanes |= edge_lane([(ax, ay), (bx, by), (cx, cy)], b, l, &mut e, &mut bound);
         }
         (lanes, e, bound)
     }
@@ -1216,27 +1254,7 @@ impl PermutedLanes16 {
             let b0 = bound(mb, mc, sb, sc);
             let b1 = bound(mc, ma, sc, sa);
             let b2 = bound(ma, mb, sa, sb);
-            let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
-            let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
-            let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
-            let gt = {
-                #[inline(always)]
-                |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, b)
-            };
-            let lt = {
-                #[inline(always)]
-                |a: __m512, b: __m512| _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b)
-            };
-            let clean = gt(abs(u), b0) & gt(abs(v), b1) & gt(abs(w), b2);
-            let zero = _mm512_setzero_ps();
-            let negative = lt(u, zero) | lt(v, zero) | lt(w, zero);
-            let positive = gt(u, zero) | gt(v, zero) | gt(w, zero);
-            let lanes = (!clean | !(negative & positive)) as u32;
-            (
-                lanes,
-                [u, v, w].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
-                [b0, b1, b2].map(|x| std::mem::transmute::<__m512, [f32; 16]>(x)),
-            )
+            edge_lanes16_avx512([(ax, ay), (bx, by), (cx, cy)], [b0, b1, b2])
         }
     }
 }

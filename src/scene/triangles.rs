@@ -17,7 +17,7 @@
 //!
 //! Each lane computes the edge test of [`WatertightRay::intersect8`] with
 //! the same float operations on the same values, and a lane that passes
-//! it finishes with the same function (`WatertightRay::finish_one`: the
+//! it finishes with the same function (`WatertightRay::finish_lane`: the
 //! double-precision re-check near edges, the plane distance), so every
 //! triangle's `t` and barycentrics are bit for bit the per-ray query's.
 //! The per-ray query keeps, among equally near triangles, one chosen by
@@ -190,7 +190,7 @@ impl Rays16 {
     /// `t` in `(0, t_hi]`: a lane is left out only when the crossing is
     /// certainly behind its origin (or parallel) or beyond `t_hi` even
     /// allowing for rounding, so the triangle's exact test
-    /// (`WatertightRay::finish_one`, whose plane distance is the
+    /// (`WatertightRay::finish_lane`, whose plane distance is the
     /// double-precision `n . (p0 - o) / n . d`) could not hit there.
     #[inline(always)]
     fn crossing_plane<const AVX512: bool>(
@@ -313,6 +313,40 @@ impl Rays16 {
     }
 }
 
+/// One group of up to [`WIDTH`] rays of one permutation kind, laid out
+/// for the tests of [`TriangleBatch::candidates`].
+struct Group {
+    lanes: PermutedLanes16,
+    rays: Rays16,
+    /// The lanes that hold a ray of the group.
+    valid: LaneMask,
+}
+
+impl Group {
+    fn new(sorted: &Sorted, group: &[u32], rays: &[Ray]) -> Self {
+        Group {
+            lanes: PermutedLanes16::new(sorted.wt.as_slice(), group),
+            rays: Rays16::new(group, rays),
+            valid: if group.len() == WIDTH {
+                u32::MAX >> 16
+            } else {
+                (1 << group.len()) - 1
+            },
+        }
+    }
+}
+
+/// The lanes of a group that passed a triangle's edge test or need its
+/// re-check (`pass`), with their edge functions `e` and bounds `b`, and
+/// the triangle's block and lane there.
+struct Candidates<'b> {
+    pass: LaneMask,
+    e: [[f32; WIDTH]; 3],
+    b: [[f32; WIDTH]; 3],
+    block: &'b Tri8,
+    j: usize,
+}
+
 impl<'a> TriangleBatch<'a> {
     /// The batch of `scene`'s triangles, or `None` unless every bounded
     /// instance is in one merged group of at most [`MAX_TRIANGLES`]
@@ -372,6 +406,38 @@ impl<'a> TriangleBatch<'a> {
             => TriangleBatch<'_>, occluded_kernel
     }
 
+    /// The lanes of `mask` in `group` that may hit triangle `tri` within
+    /// `t_hi`: those its box and plane tests keep, then those its edge
+    /// test passes or sends to the re-check; `None` when no lane is left.
+    #[inline(always)]
+    fn candidates<const AVX512: bool>(
+        &self,
+        tri: &TriCull,
+        group: &Group,
+        t_hi: &[f32; WIDTH],
+        mask: LaneMask,
+    ) -> Option<Candidates<'a>> {
+        let near = group.rays.crossing::<AVX512>(&tri.lo, &tri.hi, t_hi) & mask;
+        if near == 0 {
+            return None;
+        }
+        let near = group.rays.crossing_plane::<AVX512>(&tri.n, &tri.p0, t_hi) & near;
+        if near == 0 {
+            return None;
+        }
+        let block = &self.blocks[tri.block as usize];
+        let j = tri.lane as usize;
+        let (pass, e, b) = group.lanes.edges::<AVX512>(block, j);
+        let pass = pass & near;
+        (pass != 0).then_some(Candidates {
+            pass,
+            e,
+            b,
+            block,
+            j,
+        })
+    }
+
     #[inline(always)]
     fn intersect_kernel<const AVX: bool, const AVX512: bool>(
         &self,
@@ -384,34 +450,16 @@ impl<'a> TriangleBatch<'a> {
         }
         let sorted = Sorted::new(rays);
         for group in sorted.groups() {
-            let m = group.len();
-            let lanes = PermutedLanes16::new(sorted.wt.as_slice(), group);
-            let valid: LaneMask = if m == WIDTH {
-                u32::MAX >> 16
-            } else {
-                (1 << m) - 1
-            };
+            let g = Group::new(&sorted, group, rays);
             let mut best_t = [f32::INFINITY; WIDTH];
             let mut best = [(u32::MAX, 0.0f32, 0.0f32); WIDTH];
             let mut tied: LaneMask = 0;
-            let soa = Rays16::new(group, rays);
             for tri in &self.tris {
-                let near = soa.crossing::<AVX512>(&tri.lo, &tri.hi, &best_t) & valid;
-                if near == 0 {
+                let Some(c) = self.candidates::<AVX512>(tri, &g, &best_t, g.valid) else {
                     continue;
-                }
-                let near = soa.crossing_plane::<AVX512>(&tri.n, &tri.p0, &best_t) & near;
-                if near == 0 {
-                    continue;
-                }
-                let block = &self.blocks[tri.block as usize];
-                let j = tri.lane as usize;
-                let (pass, e, b) = lanes.edges::<AVX512>(block, j);
-                let mut pass = pass & near;
-                if pass == 0 {
-                    continue;
-                }
-                let corners = block.corners(j);
+                };
+                let corners = c.block.corners(c.j);
+                let mut pass = c.pass;
                 while pass != 0 {
                     let l = pass.trailing_zeros() as usize;
                     pass &= pass - 1;
@@ -422,13 +470,11 @@ impl<'a> TriangleBatch<'a> {
                     } else {
                         best_t[l].next_up()
                     };
-                    let uvw = [e[0][l], e[1][l], e[2][l]];
-                    let bound = [b[0][l], b[1][l], b[2][l]];
                     let w = &sorted.wt[group[l] as usize];
-                    if let Some((t, b1, b2)) = w.finish_one(corners, uvw, bound, 0.0, reach) {
+                    if let Some((t, b1, b2)) = w.finish_lane(corners, &c.e, &c.b, l, 0.0, reach) {
                         if t < best_t[l] {
                             best_t[l] = t;
-                            best[l] = (block.first + j as u32, b1, b2);
+                            best[l] = (c.block.first + c.j as u32, b1, b2);
                             tied &= !(1 << l);
                         } else {
                             tied |= 1 << l;
@@ -472,37 +518,21 @@ impl<'a> TriangleBatch<'a> {
         for group in sorted.groups() {
             let m = group.len();
             let reach: [f32; WIDTH] = std::array::from_fn(|l| t_max[group[l.min(m - 1)] as usize]);
-            let lanes = PermutedLanes16::new(sorted.wt.as_slice(), group);
-            let mut open: LaneMask = if m == WIDTH {
-                u32::MAX >> 16
-            } else {
-                (1 << m) - 1
-            };
-            let soa = Rays16::new(group, rays);
+            let g = Group::new(&sorted, group, rays);
+            let mut open = g.valid;
             for tri in &self.tris {
-                let near = soa.crossing::<AVX512>(&tri.lo, &tri.hi, &reach) & open;
-                if near == 0 {
+                let Some(c) = self.candidates::<AVX512>(tri, &g, &reach, open) else {
                     continue;
-                }
-                let near = soa.crossing_plane::<AVX512>(&tri.n, &tri.p0, &reach) & near;
-                if near == 0 {
-                    continue;
-                }
-                let block = &self.blocks[tri.block as usize];
-                let j = tri.lane as usize;
-                let (pass, e, b) = lanes.edges::<AVX512>(block, j);
-                let mut pass = pass & near;
-                if pass == 0 {
-                    continue;
-                }
-                let corners = block.corners(j);
+                };
+                let corners = c.block.corners(c.j);
+                let mut pass = c.pass;
                 while pass != 0 {
                     let l = pass.trailing_zeros() as usize;
                     pass &= pass - 1;
-                    let uvw = [e[0][l], e[1][l], e[2][l]];
-                    let bound = [b[0][l], b[1][l], b[2][l]];
                     let w = &sorted.wt[group[l] as usize];
-                    if w.finish_one(corners, uvw, bound, 0.0, reach[l]).is_some() {
+                    if w.finish_lane(corners, &c.e, &c.b, l, 0.0, reach[l])
+                        .is_some()
+                    {
                         open &= !(1 << l);
                     }
                 }

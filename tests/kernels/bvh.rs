@@ -1111,6 +1111,21 @@ fn cube() -> Mesh {
     Mesh::new("cube", data, NormalMode::Flat, BuildQuality::Medium).unwrap()
 }
 
+/// `instances` with the default material, mesh merging asked for or not,
+/// committed.
+fn committed_scene(instances: Vec<Instance>, merge: bool) -> RenderScene {
+    let mut scene = RenderScene::new(
+        instances,
+        vec![Material::default()],
+        vec![],
+        Vec3::ZERO,
+        BuildQuality::Medium,
+    );
+    scene.set_mesh_merging(merge);
+    scene.commit();
+    scene
+}
+
 /// The wavefront's batched test of a small merged mesh
 /// (`scene::triangles`) gives every ray the hit the per-ray query gives,
 /// bit for bit (`t`, point, normals, `uv`, instance), and every segment
@@ -1181,15 +1196,7 @@ fn batched_triangles_give_the_per_ray_hits() {
                     .collect::<Vec<_>>()
             })
             .collect();
-        let mut scene = RenderScene::new(
-            instances,
-            vec![Material::default()],
-            vec![],
-            Vec3::ZERO,
-            BuildQuality::Medium,
-        );
-        scene.set_mesh_merging(true);
-        scene.commit();
+        let scene = committed_scene(instances, true);
         assert_eq!(scene.merged_instances(), 5);
         let o = Vec3A::from(offset);
         let mut rays = Vec::new();
@@ -1318,16 +1325,7 @@ fn batched_triangles_only_for_one_small_merged_mesh() {
                 0,
             ));
         }
-        let mut s = RenderScene::new(
-            instances,
-            vec![Material::default()],
-            vec![],
-            Vec3::ZERO,
-            BuildQuality::Medium,
-        );
-        s.set_mesh_merging(merge);
-        s.commit();
-        s
+        committed_scene(instances, merge)
     };
     assert!(TriangleBatch::new(&scene(vec![cube(), cube()], false, true, &mut rng)).is_some());
     assert!(TriangleBatch::new(&scene(vec![cube(), cube()], true, true, &mut rng)).is_none());
