@@ -143,6 +143,17 @@ fn is_own_entry(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> bool {
         && (beyond(scene, hit, dir) - hit.point).length() >= hit.t
 }
 
+/// True when [`propagate`] would leave a segment of direction `dir` that
+/// ends at `hit` as it is: no medium along it, and its end (a surface or
+/// an escape) is not a boundary the ray crosses. [`propagate`] then ends it
+/// on `hit` itself (or escapes it) with weight one, no radiance, no rays
+/// and no numbers drawn; only its ray would restart at the hit point.
+#[inline]
+pub fn is_plain_segment(scene: &RenderScene, hit: Option<&Hit>, dir: Vec3A) -> bool {
+    segment_medium(scene, hit, dir).is_none()
+        && hit.is_none_or(|h| !is_interface(scene, h) && !is_own_entry(scene, h, dir))
+}
+
 /// True when `hit` is on an index-matched boundary that rays cross.
 #[inline]
 fn is_interface(scene: &RenderScene, hit: &Hit) -> bool {

@@ -234,6 +234,9 @@ struct SegmentUpdate {
 #[derive(Debug, Default)]
 pub struct MediaChunk {
     updates: Vec<SegmentUpdate>,
+    /// The chunk's rays that end on a surface or escape, in order: those
+    /// of `updates` and those whose segment is plain (left as it is).
+    routes: Vec<u32>,
     shaded: ShadeOutput,
 }
 
@@ -252,7 +255,9 @@ impl std::borrow::BorrowMut<ShadeOutput> for MediaChunk {
 impl MediaChunk {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
-        self.updates.capacity() * std::mem::size_of::<SegmentUpdate>() + self.shaded.bytes()
+        self.updates.capacity() * std::mem::size_of::<SegmentUpdate>()
+            + self.routes.capacity() * std::mem::size_of::<u32>()
+            + self.shaded.bytes()
     }
 }
 
@@ -276,7 +281,11 @@ pub struct MediaTargets<'a> {
 /// recursive tracer does, starting from its closest hit in `found`. A
 /// segment that ends on a surface or escapes is written back in place
 /// (its ray, weighted throughput and end) and routed by index to its
-/// class's hit queue or to the escaped queue; a scattering event adds its
+/// class's hit queue or to the escaped queue; a segment through no
+/// medium to a surface it does not cross ([`volume::is_plain_segment`],
+/// most segments of most scenes with media) is only routed, its ray left
+/// with its old origin, which no later stage reads (shading starts from
+/// the hit, escapes from the direction). A scattering event adds its
 /// next-event shadow rays ([`volume::medium_next_event`]) and its next
 /// ray ([`volume::continue_in_medium`]). `seeds` holds each path's
 /// sampler seed ([`generate_camera_rays`]).
@@ -308,10 +317,22 @@ pub fn sample_media(
     let rays_in: &RayQueue = rays;
     let found_in: &ClosestHits = found;
     let chunks = drain_queue(rays_in.len(), scratch, |range, chunk| {
-        let MediaChunk { updates, shaded } = chunk;
+        let MediaChunk {
+            updates,
+            routes,
+            shaded,
+        } = chunk;
         updates.clear();
+        routes.clear();
         shaded.clear();
         for i in range {
+            // A segment through no medium to a surface it does not cross
+            // (or out of the scene) stays as it is: only routed, with no
+            // sampler made, no copy of the ray and its hit.
+            if volume::is_plain_segment(scene, found_in.0[i].as_ref(), rays_in.direction[i]) {
+                routes.push(i as u32);
+                continue;
+            }
             let mut item = rays_in.get(i);
             let mut sampler = seeds[item.path as usize].sampler();
             let mut found = found_in.0[i];
@@ -341,9 +362,13 @@ pub fn sample_media(
                     hit,
                 };
                 match seg.end {
-                    SegmentEnd::Surface { hit, ray } => updates.push(update(ray, Some(hit))),
+                    SegmentEnd::Surface { hit, ray } => {
+                        updates.push(update(ray, Some(hit)));
+                        routes.push(i as u32);
+                    }
                     SegmentEnd::Escaped(d) => {
                         updates.push(update(Ray::new(item.ray.origin, d), None));
+                        routes.push(i as u32);
                     }
                     SegmentEnd::Lost => {}
                     SegmentEnd::Scattered(v) => {
@@ -399,9 +424,6 @@ pub fn sample_media(
         hits,
         shade,
     } = to;
-    // Chunks in order, updates in ray order: every queue receives
-    // ascending indices, as `route_rays` gives them.
-    let queues = hits.all_mut();
     for u in chunks.iter().flat_map(|c| &c.updates) {
         let i = u.index as usize;
         rays.origin[i] = u.ray.origin;
@@ -411,9 +433,14 @@ pub fn sample_media(
         rays.pdf[i] = u.pdf;
         rays.cone[i] = u.cone;
         found.0[i] = u.hit;
-        match u.hit {
-            None => escaped.push(u.index),
-            Some(h) => queues[classes[h.material as usize] as usize].push(u.index),
+    }
+    // Chunks in order, routes in ray order: every queue receives
+    // ascending indices, as `route_rays` gives them.
+    let queues = hits.all_mut();
+    for &i in chunks.iter().flat_map(|c| &c.routes) {
+        match &found.0[i as usize] {
+            None => escaped.push(i),
+            Some(h) => queues[classes[h.material as usize] as usize].push(i),
         }
     }
     join_shade_outputs(chunks, shade);
