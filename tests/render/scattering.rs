@@ -362,6 +362,51 @@ fn a_subsurface_ball_of_tiny_radius_is_the_lambertian_ball() {
     }
 }
 
+/// The wavefront follows a walk through a lit scattering medium in one
+/// pass of its medium stage too: each scattering event's shadow rays are
+/// traced and their light added at once, and the walk goes on in the
+/// stage. A ball of index-matched boundary (the ray enters without
+/// refraction) filled with a dense, nearly white scattering medium under a
+/// white sky (one batch of 8x8 pixels, 4 samples): every event can see
+/// the sky, so each makes a shadow ray; the walks take on average at least
+/// 10 steps, the image and counts are the recursive tracer's, and the
+/// batch's longest path needs at most 4 bounces of the queues (the camera
+/// ray, the walk from the boundary, the ray that left). When a lit event
+/// handed its next ray to the queues, this took as many bounces as the
+/// longest walk has steps (with that, this test failed: 358 bounces for walks
+/// of 27.7 steps on average).
+#[test]
+fn the_wavefront_walks_through_a_lit_medium_in_one_bounce() {
+    let scene = r#"
+[camera]
+look_from = [0, 0, 3]
+look_at = [0, 0, 0]
+vfov = 30
+[environment]
+color = 1.0
+[[objects]]
+shape = { type = "sphere", radius = 1.0 }
+material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = 40.0, absorption = 0.4 }
+"#;
+    let s = path_settings(8, 8, 4, 1024);
+    let paths = 8 * 8 * 4;
+    let wav = render_toml(scene, config(s.clone(), IntegratorKind::Wavefront));
+    let rec = render_toml(scene, config(s, IntegratorKind::Recursive));
+    assert_eq!(rec.counters, wav.counters);
+    assert_integrators_agree(rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
+    let report = wav.wavefront.unwrap();
+    assert_eq!(report.batches, 1);
+    let steps = wav.counters.rays.reflection as f64 / paths as f64;
+    assert!(steps >= 10.0, "{steps} walk steps per path");
+    assert!(
+        wav.counters.rays.shadow as f64 >= 10.0 * paths as f64,
+        "{} shadow rays",
+        wav.counters.rays.shadow
+    );
+    let bounces = report.runs.get(Stage::IntersectClosest);
+    assert!(bounces <= 4, "{bounces} bounces for walks of {steps} steps");
+}
+
 /// The wavefront follows a random walk inside a subsurface material in
 /// one pass of its medium stage: no light reaches the walk's scattering
 /// events, so they make no shadow rays, and a walk of many steps costs one

@@ -193,6 +193,24 @@ impl ShadeOutput {
         self.hit_ends.clear();
     }
 
+    /// [`ShadeOutput::trace_shadows_through`], adding the radiance the
+    /// rays bring back to their paths as emission, after what the chunk
+    /// emitted so far, instead of keeping it for the shadow stage: for a
+    /// stage that follows a path on past the vertex that made the rays
+    /// (the media stage's walks), so that each path's terms keep the order
+    /// of its vertices.
+    pub fn trace_shadows_through_now(&mut self, transmittance: impl Fn(&Ray, f32) -> Color) {
+        let q = &self.shadows;
+        for j in 0..q.len() {
+            let t = transmittance(&q.ray(j), q.t_max[j]);
+            if t != Color::ZERO {
+                self.emitted.push((q.path[j], q.radiance[j] * t));
+            }
+        }
+        self.shadows.clear();
+        self.hit_ends.clear();
+    }
+
     /// Adds `radiance` to path `path`.
     #[inline]
     pub fn emit(&mut self, path: u32, radiance: Color) {

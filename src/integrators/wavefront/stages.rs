@@ -372,19 +372,19 @@ pub fn sample_media(
                     }
                     SegmentEnd::Lost => {}
                     SegmentEnd::Scattered(v) => {
-                        let mut shadowed = false;
                         volume::medium_next_event(
                             scene,
                             settings,
                             &v,
                             &mut sampler,
                             item.depth,
-                            |q| {
-                                shadowed = true;
-                                shaded.push_shadow_from(item.path, throughput, q)
-                            },
+                            |q| shaded.push_shadow_from(item.path, throughput, q),
                         );
-                        shaded.trace_shadows_through(|r, t_max| {
+                        // The event's shadow rays are traced here and
+                        // their light added at once, before the walk goes
+                        // on: the path's terms in the order of its
+                        // vertices, as the recursive tracer adds them.
+                        shaded.trace_shadows_through_now(|r, t_max| {
                             volume::shadow_transmittance(scene, r, t_max)
                         });
                         if let Some(c) = volume::continue_in_medium(
@@ -394,7 +394,10 @@ pub fn sample_media(
                             throughput,
                             &mut sampler,
                         ) {
-                            let next = RayItem {
+                            // The walk goes on here, one step at a time
+                            // as the recursive tracer follows it.
+                            shaded.count_secondary(c.sample.kind);
+                            item = RayItem {
                                 ray: c.sample.ray,
                                 throughput: throughput * c.sample.weight * c.scale,
                                 path: item.path,
@@ -402,16 +405,8 @@ pub fn sample_media(
                                 pdf: c.sample.pdf,
                                 cone: RayCone::NONE,
                             };
-                            if shadowed {
-                                shaded.push_secondary(c.sample.kind, next);
-                            } else {
-                                // The event made no shadow ray (no light
-                                // reaches it): walk on here.
-                                shaded.count_secondary(c.sample.kind);
-                                item = next;
-                                found = scene.intersect(&item.ray, 0.0, f32::INFINITY);
-                                continue;
-                            }
+                            found = scene.intersect(&item.ray, 0.0, f32::INFINITY);
+                            continue;
                         }
                     }
                 }
