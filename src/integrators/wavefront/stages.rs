@@ -285,24 +285,20 @@ pub struct MediaTargets<'a> {
 /// medium to a surface it does not cross ([`volume::is_plain_segment`],
 /// most segments of most scenes with media) is only routed, its ray left
 /// with its old origin, which no later stage reads (shading starts from
-/// the hit, escapes from the direction). A scattering event adds its
-/// next-event shadow rays ([`volume::medium_next_event`]) and its next
-/// ray ([`volume::continue_in_medium`]). `seeds` holds each path's
-/// sampler seed ([`generate_camera_rays`]).
-///
-/// A scattering event that makes no shadow ray (inside a subsurface
-/// material, behind its diffuse boundary, where
-/// [`volume::MediumVertex::lit`] is false; or where no light can be
-/// sampled) has its next ray followed here at once, one ray at a time as
-/// the recursive tracer follows it, until the walk reaches a surface,
-/// escapes, is lost, or makes shadow rays: a random walk of many steps
-/// costs one bounce of the queues, not one per step (it had been one
-/// pass through every stage and queue per step, most of them over a
-/// handful of rays late in a batch). Each path's terms are added in the
-/// order they were: such a step adds no shadow-ray light, which the
-/// shadow stage would have added after it, so only the light scattered
-/// in along each segment (added as it is found, in step order) comes
-/// before the walk's end.
+/// the hit, escapes from the direction). A scattering event traces its
+/// next-event shadow rays ([`volume::medium_next_event`]) and adds their
+/// light at once, then the walk goes on here with its next ray
+/// ([`volume::continue_in_medium`]), one ray at a time as the recursive
+/// tracer follows it, until it reaches a surface, escapes or is lost: a
+/// walk of many steps costs one bounce of the queues, not one per step
+/// (it had been one pass through every stage and queue per step, most of
+/// them over a handful of rays late in a batch; a dense lit ball took 358
+/// bounces of one batch, now 4). Each path's terms are added in the order
+/// of its vertices, as the recursive tracer adds them: the light scattered
+/// in along each segment and the shadow rays' light of each event go into
+/// the chunk's emission in step order, and the surface the walk ends on
+/// is shaded by a later stage of the same bounce. `seeds` holds each
+/// path's sampler seed ([`generate_camera_rays`]).
 #[allow(clippy::too_many_arguments)]
 pub fn sample_media(
     scene: &RenderScene,
