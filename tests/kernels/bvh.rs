@@ -769,10 +769,13 @@ fn streams_equal_single_rays_with(make: fn(&mut Rng, bool) -> RenderScene) {
 /// polygons' corners, where neighbours tie, and rays from points on the
 /// walls in random directions, as bounces leave them), and on random
 /// polygons of three to six sides under random transforms (several
-/// transform groups).
+/// transform groups). On every instruction set the machine has, in full
+/// batches of [`BATCH_LANES`] rays and in partial ones (made to fail by
+/// filling only the first eight lanes of a batch with their rays).
 #[test]
 fn batched_polygons_give_the_per_ray_hits() {
-    use prism::scene::polygons::PolygonBatch;
+    use prism::core::simd::{self, Isa};
+    use prism::scene::polygons::{BATCH_LANES, PolygonBatch};
     let desc = crate::common::scenes::load(&crate::common::assets().join("cornell.toml"));
     let eye = desc.cameras[0].look_from;
     let instances: Vec<Instance> = desc
@@ -876,40 +879,49 @@ fn batched_polygons_give_the_per_ray_hits() {
                 rng.range(0.0, 8.0)
             });
         }
-        for (group, limits) in rays.chunks(8).zip(t_max.chunks(8)) {
-            let mut got = [None; 8];
-            batch.intersect(scene, group, &mut got[..group.len()]);
-            let mask = batch.occluded(scene, group, limits);
-            for (l, ray) in group.iter().enumerate() {
-                let want = scene.intersect(ray, 0.0, f32::INFINITY);
-                assert_eq!(format!("{:?}", got[l]), format!("{want:?}"), "{ray:?}");
-                hits += want.is_some() as usize;
-                let occluded = scene.occluded(ray, 0.0, limits[l]);
-                assert_eq!(mask & (1 << l) != 0, occluded, "{ray:?} to {}", limits[l]);
-                blocked += occluded as usize;
-                // A tie: two polygons as near along the ray (handed to
-                // the per-ray query by the batch).
-                let mut near: Vec<u32> = scene
-                    .instances()
-                    .iter()
-                    .filter_map(|inst| {
-                        let InstanceGeometry::Shape(s) = &inst.geometry else {
-                            return None;
-                        };
-                        let m = &inst.transform.to_object;
-                        let local = Ray::new(
-                            m.transform_point3a(ray.origin),
-                            m.transform_vector3a(ray.direction),
-                        );
-                        s.intersect(&local, 0.0, f32::INFINITY)
-                            .map(|h| h.t.to_bits())
-                    })
-                    .collect();
-                near.sort_by(|a, b| f32::from_bits(*a).total_cmp(&f32::from_bits(*b)));
-                ties += (near.len() > 1 && near[0] == near[1]) as usize;
+        for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512] {
+            if !simd::force(isa) {
+                continue;
+            }
+            // Full batches, and partial ones whose last rays repeat.
+            for size in [BATCH_LANES, 7] {
+                for (group, limits) in rays.chunks(size).zip(t_max.chunks(size)) {
+                    let mut got = [None; BATCH_LANES];
+                    batch.intersect(scene, group, &mut got[..group.len()]);
+                    let mask = batch.occluded(scene, group, limits);
+                    for (l, ray) in group.iter().enumerate() {
+                        let want = scene.intersect(ray, 0.0, f32::INFINITY);
+                        assert_eq!(format!("{:?}", got[l]), format!("{want:?}"), "{ray:?}");
+                        hits += want.is_some() as usize;
+                        let occluded = scene.occluded(ray, 0.0, limits[l]);
+                        assert_eq!(mask & (1 << l) != 0, occluded, "{ray:?} to {}", limits[l]);
+                        blocked += occluded as usize;
+                        // A tie: two polygons as near along the ray (handed to
+                        // the per-ray query by the batch).
+                        let mut near: Vec<u32> = scene
+                            .instances()
+                            .iter()
+                            .filter_map(|inst| {
+                                let InstanceGeometry::Shape(s) = &inst.geometry else {
+                                    return None;
+                                };
+                                let m = &inst.transform.to_object;
+                                let local = Ray::new(
+                                    m.transform_point3a(ray.origin),
+                                    m.transform_vector3a(ray.direction),
+                                );
+                                s.intersect(&local, 0.0, f32::INFINITY)
+                                    .map(|h| h.t.to_bits())
+                            })
+                            .collect();
+                        near.sort_by(|a, b| f32::from_bits(*a).total_cmp(&f32::from_bits(*b)));
+                        ties += (near.len() > 1 && near[0] == near[1]) as usize;
+                    }
+                }
             }
         }
     }
+    simd::force(simd::detected());
     eprintln!("{hits} hits, {blocked} blocked, {ties} ties");
     assert!(
         hits > 3000 && blocked > 1000 && ties > 10,

@@ -29,7 +29,7 @@ use crate::scene::RenderScene;
 use crate::scene::camera::CameraRays;
 use crate::scene::light::WorldLight;
 use crate::scene::material::MaterialClass;
-use crate::scene::polygons::PolygonBatch;
+use crate::scene::polygons::{BATCH_LANES, PolygonBatch};
 use crate::scene::query::COHERENT_LANES;
 use crate::scene::triangles::TriangleBatch;
 use crate::transport::gooch::gooch_shade;
@@ -163,7 +163,7 @@ pub fn intersect_closest(
     // Every slot is written below: keep what the last bounce left in the
     // slots (resizing fills only new ones) instead of clearing them first.
     //
-    // A scene of a few polygons skips the top level: eight rays at a
+    // A scene of a few polygons skips the top level: sixteen rays at a
     // time meet every polygon (`PolygonBatch`), the same hits. A scene of
     // one small merged mesh skips its BVH: the chunk's rays, sorted by
     // axis permutation, meet every triangle sixteen at a time
@@ -178,7 +178,13 @@ pub fn intersect_closest(
     found.0.resize(n, None);
     let batch = PolygonBatch::new(scene);
     let camera = batch.is_none() && rays.depth.iter().all(|&d| d == 0);
-    let width = if camera { COHERENT_LANES } else { LANES };
+    let width = if batch.is_some() {
+        BATCH_LANES
+    } else if camera {
+        COHERENT_LANES
+    } else {
+        LANES
+    };
     let triangles = TriangleBatch::new(scene);
     found
         .0
@@ -549,7 +555,12 @@ fn trace_chunk_shadows(
     } else if let Some(t) = triangles {
         out.trace_shadows_all(|rays, t_max, blocked| t.occluded(rays, t_max, blocked));
     } else {
-        out.trace_shadows(shadow_group_width(), |rays, t_max| {
+        let width = if batch.is_some() {
+            BATCH_LANES
+        } else {
+            shadow_group_width()
+        };
+        out.trace_shadows(width, |rays, t_max| {
             occluded_group(scene, batch, rays, t_max)
         });
     }
@@ -635,10 +646,14 @@ fn occluded_group(
     t_max: &[f32],
 ) -> LaneMask {
     if let Some(b) = batch {
-        // (The batch takes up to eight rays at a time.)
+        // (The batch takes up to `BATCH_LANES` rays at a time.)
         let mut blocked = 0;
-        for (c, (r, t)) in rays.chunks(LANES).zip(t_max.chunks(LANES)).enumerate() {
-            blocked |= b.occluded(scene, r, t) << (c * LANES);
+        for (c, (r, t)) in rays
+            .chunks(BATCH_LANES)
+            .zip(t_max.chunks(BATCH_LANES))
+            .enumerate()
+        {
+            blocked |= b.occluded(scene, r, t) << (c * BATCH_LANES);
         }
         return blocked;
     }
