@@ -123,22 +123,27 @@ pub struct IntegratorResult {
 pub struct Throughput {
     /// Camera rays, one at a time.
     pub camera_single: f64,
-    /// Camera rays, packets of neighbouring pixels (what the wavefront
-    /// does when the scene has no mesh).
+    /// Camera rays through pixel centres, packets of eight neighbouring
+    /// pixels of a row. (The integrators trace camera rays sixteen at a
+    /// time on the AVX-512 path, `RenderScene::intersect_coherent`, and
+    /// the wavefront takes them in path order: at 16 spp and above a
+    /// packet is one pixel's samples.)
     pub camera_packets: f64,
     /// Camera rays through the top level in packets and every mesh as
-    /// streams (what the wavefront does when the scene has meshes).
+    /// streams of 1024 rays (a mode of the kernel no integrator uses since
+    /// meshes have their own packet traversal).
     pub camera_streams: f64,
     /// Incoherent secondary rays (cosine-distributed from the camera hits), one at a time.
     pub secondary_single: f64,
-    /// The same secondary rays in packets of consecutive rays.
+    /// The same secondary rays in packets of eight consecutive rays,
+    /// meshes traversed as packets too (what the wavefront does with
+    /// eight bounce rays that share an octant).
     pub secondary_packets: f64,
-    /// The same packets through the top level, meshes one lane at a time
-    /// (what the wavefront does with shadow rays).
+    /// The same packets through the top level, meshes one lane at a time.
     pub secondary_top_level_packets: f64,
     /// The same secondary rays through the top level in packets and every
-    /// mesh as streams of 1024 rays split by direction octant (what the
-    /// wavefront does with closest-hit rays when the scene has a mesh).
+    /// mesh as streams of 1024 rays split by direction octant (a mode no
+    /// integrator uses any more).
     pub secondary_streams: f64,
     /// Number of secondary rays.
     pub secondary_rays: usize,
