@@ -362,6 +362,90 @@ fn a_subsurface_ball_of_tiny_radius_is_the_lambertian_ball() {
     }
 }
 
+/// `volume::is_plain_segment`, by which the wavefront's medium stage only
+/// routes a segment, holds only where `volume::propagate` leaves the
+/// segment as it is: ending on the same hit (the same bits) with its ray
+/// restarting at the hit point, or escaping along its direction, with
+/// weight one, no light, no rays and no numbers drawn. Rays from all
+/// over `FOGGY`'s objects without its fog (an index-matched scattering
+/// ball, a glass ball, a subsurface ball, a floor, a lamp), and from
+/// points on the subsurface ball's surface into it (its own entry).
+/// Made to fail twice: without the index-matched boundary clause (a ray
+/// that reaches the scattering ball from outside was called plain, and
+/// propagation crossed into the ball and drew numbers) and without the
+/// own-entry clause (a ray from the subsurface ball's surface into it).
+#[test]
+fn plain_segments_are_those_propagation_leaves_alone() {
+    use glam::Vec3A;
+    use prism::core::math::{Color, Ray};
+    use prism::core::rng::Sampler;
+    use prism::transport::volume::{self, SegmentEnd};
+
+    use crate::common::rng::{Random, SplitMix64};
+    let start = FOGGY.find("[[objects]]").unwrap();
+    let clear = format!(
+        "[camera]\nlook_from = [0, 1.5, 6]\nlook_at = [0, 0.8, 0]\n{}",
+        &FOGGY[start..]
+    );
+    let desc = crate::common::scenes::load_toml(&clear).unwrap();
+    let mut renderer = prism::systems::Renderer::with_scene(
+        desc,
+        config(path_settings(2, 2, 1, 4), IntegratorKind::Recursive),
+        0,
+    )
+    .unwrap();
+    renderer.render().unwrap();
+    let scene = renderer.scene().unwrap();
+    assert!(scene.has_media() && scene.fog().is_none());
+    let mut rng = SplitMix64(45);
+    let origin = Vec3A::from(scene.origin().as_vec3());
+    let (mut plain, mut not_plain, mut surfaces) = (0, 0, 0);
+    for k in 0..20_000u32 {
+        let ray = if k % 4 == 3 {
+            // From the subsurface ball's surface (centre (0.1, 0.45, 1.3),
+            // radius 0.4) into it.
+            let n = Vec3A::from(rng.dir());
+            let p = Vec3A::new(0.1, 0.45, 1.3) + n * 0.4;
+            let d = (Vec3A::from(rng.dir()) - n * 1.5).normalize();
+            Ray::new(p - origin, d)
+        } else {
+            let o = Vec3A::from(rng.vec(-2.5, 2.5)) + Vec3A::new(0.0, 1.5, 0.5);
+            Ray::new(o - origin, Vec3A::from(rng.dir()))
+        };
+        let hit = scene.intersect(&ray, 0.0, f32::INFINITY);
+        if !volume::is_plain_segment(&scene, hit.as_ref(), ray.direction) {
+            not_plain += 1;
+            continue;
+        }
+        plain += 1;
+        let mut sampler = Sampler::new(3, k, 0);
+        let before = format!("{sampler:?}");
+        let seg = volume::propagate(&scene, &ray, hit, 2, Color::ONE, &mut sampler);
+        assert_eq!(format!("{sampler:?}"), before, "ray {k}: numbers drawn");
+        assert_eq!(seg.weight, Color::ONE, "ray {k}");
+        assert_eq!(seg.radiance, Color::ZERO, "ray {k}");
+        assert_eq!(seg.rays, (0, 0), "ray {k}");
+        match (seg.end, hit) {
+            (
+                SegmentEnd::Surface {
+                    hit: end,
+                    ray: next,
+                },
+                Some(h),
+            ) => {
+                surfaces += 1;
+                assert_eq!(format!("{end:?}"), format!("{h:?}"), "ray {k}");
+                assert_eq!(next.origin, h.point, "ray {k}");
+                assert_eq!(next.direction, ray.direction, "ray {k}");
+            }
+            (SegmentEnd::Escaped(d), None) => assert_eq!(d, ray.direction, "ray {k}"),
+            (end, h) => panic!("ray {k}: plain, but propagation ended {end:?} (hit {h:?})"),
+        }
+    }
+    eprintln!("{plain} plain ({surfaces} on surfaces), {not_plain} not");
+    assert!(surfaces > 5_000 && plain > surfaces && not_plain > 2_000);
+}
+
 /// The wavefront follows a walk through a lit scattering medium in one
 /// pass of its medium stage too: each scattering event's shadow rays are
 /// traced and their light added at once, and the walk goes on in the
