@@ -461,34 +461,14 @@ fn plain_segments_are_those_propagation_leaves_alone() {
 /// of 27.7 steps on average).
 #[test]
 fn the_wavefront_walks_through_a_lit_medium_in_one_bounce() {
-    let scene = r#"
-[camera]
-look_from = [0, 0, 3]
-look_at = [0, 0, 0]
-vfov = 30
-[environment]
-color = 1.0
-[[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = 40.0, absorption = 0.4 }
-"#;
-    let s = path_settings(8, 8, 4, 1024);
-    let paths = 8 * 8 * 4;
-    let wav = render_toml(scene, config(s.clone(), IntegratorKind::Wavefront));
-    let rec = render_toml(scene, config(s, IntegratorKind::Recursive));
-    assert_eq!(rec.counters, wav.counters);
-    assert_integrators_agree(rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
-    let report = wav.wavefront.unwrap();
-    assert_eq!(report.batches, 1);
-    let steps = wav.counters.rays.reflection as f64 / paths as f64;
-    assert!(steps >= 10.0, "{steps} walk steps per path");
-    assert!(
-        wav.counters.rays.shadow as f64 >= 10.0 * paths as f64,
-        "{} shadow rays",
-        wav.counters.rays.shadow
+    let (counters, paths) = walks_in_one_bounce(
+        "{ color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scattering = 40.0, absorption = 0.4 }",
     );
-    let bounces = report.runs.get(Stage::IntersectClosest);
-    assert!(bounces <= 4, "{bounces} bounces for walks of {steps} steps");
+    assert!(
+        counters.rays.shadow as f64 >= 10.0 * paths as f64,
+        "{} shadow rays",
+        counters.rays.shadow
+    );
 }
 
 /// The wavefront follows a random walk inside a subsurface material in
@@ -505,7 +485,18 @@ material = { color = 1.0, diffuse = 0.0, transmission = 1.0, ior = 1.0, scatteri
 /// many bounces as the longest of them has steps.
 #[test]
 fn the_wavefront_walks_through_a_subsurface_material_in_one_bounce() {
-    let scene = r#"
+    walks_in_one_bounce("{ subsurface_color = 0.95, subsurface_radius = 0.025 }");
+}
+
+/// A unit ball of `material` under a white sky, path traced by both
+/// integrators (one batch of 8x8 pixels, 4 samples, depth 1024): the
+/// counts and images agree, the walks inside take on average at least 10
+/// steps (the reflection rays counted per path), and the wavefront's
+/// batch needs at most 4 bounces of the queues. Returns the wavefront's
+/// counters and the number of paths.
+fn walks_in_one_bounce(material: &str) -> (prism::integrators::counters::RenderCounters, u64) {
+    let scene = format!(
+        r#"
 [camera]
 look_from = [0, 0, 3]
 look_at = [0, 0, 0]
@@ -513,13 +504,14 @@ vfov = 30
 [environment]
 color = 1.0
 [[objects]]
-shape = { type = "sphere", radius = 1.0 }
-material = { subsurface_color = 0.95, subsurface_radius = 0.025 }
-"#;
+shape = {{ type = "sphere", radius = 1.0 }}
+material = {material}
+"#
+    );
     let s = path_settings(8, 8, 4, 1024);
     let paths = 8 * 8 * 4;
-    let wav = render_toml(scene, config(s.clone(), IntegratorKind::Wavefront));
-    let rec = render_toml(scene, config(s, IntegratorKind::Recursive));
+    let wav = render_toml(&scene, config(s.clone(), IntegratorKind::Wavefront));
+    let rec = render_toml(&scene, config(s, IntegratorKind::Recursive));
     assert_eq!(rec.counters, wav.counters);
     assert_integrators_agree(rec.film.as_ref().unwrap(), wav.film.as_ref().unwrap());
     let report = wav.wavefront.unwrap();
@@ -528,4 +520,5 @@ material = { subsurface_color = 0.95, subsurface_radius = 0.025 }
     assert!(steps >= 10.0, "{steps} walk steps per path");
     let bounces = report.runs.get(Stage::IntersectClosest);
     assert!(bounces <= 4, "{bounces} bounces for walks of {steps} steps");
+    (wav.counters, paths)
 }

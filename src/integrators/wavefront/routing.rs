@@ -182,13 +182,8 @@ impl ShadeOutput {
     /// ray's, and the radiance of the rays that bring any back is kept for
     /// the shadow stage to add.
     pub fn trace_shadows_through(&mut self, transmittance: impl Fn(&Ray, f32) -> Color) {
-        let q = &self.shadows;
-        for j in 0..q.len() {
-            let t = transmittance(&q.ray(j), q.t_max[j]);
-            if t != Color::ZERO {
-                self.lit.push(q.path[j], q.radiance[j] * t);
-            }
-        }
+        let lit = &mut self.lit;
+        light_through(&self.shadows, transmittance, |path, l| lit.push(path, l));
         self.shadows.clear();
         self.hit_ends.clear();
     }
@@ -200,13 +195,10 @@ impl ShadeOutput {
     /// (the media stage's walks), so that each path's terms keep the order
     /// of its vertices.
     pub fn trace_shadows_through_now(&mut self, transmittance: impl Fn(&Ray, f32) -> Color) {
-        let q = &self.shadows;
-        for j in 0..q.len() {
-            let t = transmittance(&q.ray(j), q.t_max[j]);
-            if t != Color::ZERO {
-                self.emitted.push((q.path[j], q.radiance[j] * t));
-            }
-        }
+        let emitted = &mut self.emitted;
+        light_through(&self.shadows, transmittance, |path, l| {
+            emitted.push((path, l))
+        });
         self.shadows.clear();
         self.hit_ends.clear();
     }
@@ -294,6 +286,23 @@ impl ShadeOutput {
             + self.visible.capacity()
             + self.reflections.bytes()
             + self.refractions.bytes()
+    }
+}
+
+/// Traces the shadow rays of `q` one at a time, in order, with
+/// `transmittance`, and hands each one that brings light back to `sink`
+/// (its path and radiance).
+#[inline(always)]
+fn light_through(
+    q: &ShadowQueue,
+    transmittance: impl Fn(&Ray, f32) -> Color,
+    mut sink: impl FnMut(u32, Color),
+) {
+    for j in 0..q.len() {
+        let t = transmittance(&q.ray(j), q.t_max[j]);
+        if t != Color::ZERO {
+            sink(q.path[j], q.radiance[j] * t);
+        }
     }
 }
 
