@@ -77,6 +77,12 @@ impl KeptSlot {
         (self.0[0].load(Ordering::Relaxed), [v(0), v(1), v(2), v(3)])
     }
 
+    /// The kept set's number, or `u32::MAX` for none.
+    #[inline]
+    pub fn set(&self) -> u32 {
+        self.0[0].load(Ordering::Relaxed)
+    }
+
     /// Holds `kept` for the path's next vertex.
     #[inline]
     pub fn store(&self, (set, values): (u32, [f32; 4])) {
@@ -117,6 +123,18 @@ impl SamplerSeed {
             sample,
             sobol: kind == SamplerKind::Sobol && sample < SOBOL_SAMPLES,
         }
+    }
+
+    /// What [`sobol_sets`] needs to draw Sobol set `set` (dimensions
+    /// `4 set .. 4 set + 4`) of this seed's sampler, or `None` when the
+    /// sampler's numbers are not Sobol's (the hash sampler, or a sample
+    /// beyond the sequence).
+    #[inline]
+    pub fn sobol_request(&self, set: u32) -> Option<SetRequest> {
+        self.sobol.then(|| SetRequest {
+            sample: self.sample,
+            seed: Sampler::set_seed(self.pixel_key, set),
+        })
     }
 
     /// A sampler at dimension 0.
@@ -265,6 +283,126 @@ fn sobol_set_portable(sample: u32, seed: u32) -> [f32; 4] {
         .to_f32_norm()
 }
 
+/// Sobol sets drawn side by side by [`sobol_sets`]: one AVX-512
+/// register of `u32` per quantity (two AVX2 ones, four SSE ones).
+pub const SET_LANES: usize = 16;
+
+/// One Sobol set to draw with [`sobol_sets`]: the pixel sample's index
+/// and the set's scramble seed ([`SamplerSeed::sobol_request`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SetRequest {
+    sample: u32,
+    seed: u32,
+}
+
+/// The sets of `requests` (the four numbers that [`Sampler::set_of_four`]
+/// gives for each), sixteen at a time side by side: the integer
+/// operations of [`sobol_set`] lane by lane, so the same bits (tested on
+/// every SIMD path). For a stage that has many paths' draws at hand (the
+/// wavefront's shading): one call costs a fraction of a set drawn alone,
+/// whose index shuffle is scalar and whose dimensions fill one 4-lane
+/// register. `out` must be as long as `requests`.
+pub fn sobol_sets(requests: &[SetRequest], out: &mut [[f32; 4]]) {
+    assert_eq!(requests.len(), out.len(), "one output per request");
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::core::simd::use_avx512() {
+            // SAFETY: `use_avx512` holds only on CPUs with AVX-512F, AVX2
+            // and FMA (`simd::supported`).
+            #[allow(unsafe_code)]
+            return unsafe { sobol_sets_avx512(requests, out) };
+        }
+        if crate::core::simd::use_avx2() {
+            // SAFETY: `use_avx2` holds only on CPUs with AVX2 and FMA.
+            #[allow(unsafe_code)]
+            return unsafe { sobol_sets_avx2(requests, out) };
+        }
+    }
+    sobol_sets_with(requests, out)
+}
+
+/// [`sobol_sets`] compiled for AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn sobol_sets_avx512(requests: &[SetRequest], out: &mut [[f32; 4]]) {
+    sobol_sets_with(requests, out)
+}
+
+/// [`sobol_sets`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn sobol_sets_avx2(requests: &[SetRequest], out: &mut [[f32; 4]]) {
+    sobol_sets_with(requests, out)
+}
+
+/// [`sobol_sets`]'s body, inlined into each of its code paths: full
+/// groups of [`SET_LANES`], then the rest padded with copies of the last
+/// request.
+#[inline(always)]
+fn sobol_sets_with(requests: &[SetRequest], out: &mut [[f32; 4]]) {
+    for (req, out) in requests.chunks(SET_LANES).zip(out.chunks_mut(SET_LANES)) {
+        let lane = |l: usize| req[l.min(req.len() - 1)];
+        let sample: [u32; SET_LANES] = std::array::from_fn(|l| lane(l).sample);
+        let seed: [u32; SET_LANES] = std::array::from_fn(|l| lane(l).seed);
+        let sets = sobol_set_lanes(&sample, &seed);
+        out.copy_from_slice(&sets[..req.len()]);
+    }
+}
+
+/// `hash` of `sobol_burley::parts`, one lane.
+#[inline(always)]
+fn hash_lane(mut n: u32) -> u32 {
+    n ^= 0xe6fe_3beb;
+    n ^= n >> 16;
+    n = n.wrapping_mul(0x7feb_352d);
+    n ^= n >> 15;
+    n = n.wrapping_mul(0x846c_a68b);
+    n ^ (n >> 16)
+}
+
+/// `owen_scramble_rev` of `sobol_burley::parts`, one lane.
+#[inline(always)]
+fn owen_scramble_lane(mut n: u32, scramble: u32) -> u32 {
+    n ^= n.wrapping_mul(0x3d20_adea);
+    n = n.wrapping_add(scramble);
+    n = n.wrapping_mul((scramble >> 16) | 1);
+    n ^= n.wrapping_mul(0x0552_6c56);
+    n ^ n.wrapping_mul(0x53a2_2864)
+}
+
+/// [`sobol_set`] of `SET_LANES` (sample, seed) pairs, in loops over the
+/// lanes that the compiler widens: the index shuffle, the two table rows,
+/// the per-dimension scramble and the conversion, each for every lane.
+#[inline(always)]
+fn sobol_set_lanes(sample: &[u32; SET_LANES], seed: &[u32; SET_LANES]) -> [[f32; 4]; SET_LANES] {
+    let mut shuffled = [0u32; SET_LANES];
+    for l in 0..SET_LANES {
+        debug_assert!(sample[l] < SOBOL_SAMPLES);
+        let scramble = hash_lane(seed[l] ^ 0x79c6_8e4a);
+        shuffled[l] = owen_scramble_lane(sample[l].reverse_bits(), scramble) >> 16;
+    }
+    let t = &**SOBOL_BYTES;
+    let mut sobol = [[0u32; SET_LANES]; 4];
+    for l in 0..SET_LANES {
+        let (hi, lo) = (
+            t[(shuffled[l] >> 8) as usize],
+            t[256 + (shuffled[l] & 0xff) as usize],
+        );
+        for k in 0..4 {
+            sobol[k][l] = hi[k] ^ lo[k];
+        }
+    }
+    let mut out = [[0.0f32; 4]; SET_LANES];
+    for (k, dim) in sobol.iter().enumerate() {
+        for l in 0..SET_LANES {
+            let scramble = hash_lane(scramble_seeds(seed[l])[k]);
+            let n = owen_scramble_lane(dim[l], scramble).reverse_bits();
+            out[l][k] = f32::from_bits((n >> 9) | 0x3f80_0000) - 1.0;
+        }
+    }
+    out
+}
+
 /// A 64-bit finaliser (the "splitmix64" mixing function).
 #[inline]
 fn mix64(mut z: u64) -> u64 {
@@ -367,6 +505,17 @@ impl Sampler {
     pub fn restore_kept(&mut self, (set, values): (u32, [f32; 4])) {
         self.kept_set = set;
         self.kept = values;
+    }
+
+    /// Makes `values`, Sobol set `set` of this sampler drawn elsewhere
+    /// ([`sobol_sets`] of its [`SamplerSeed::sobol_request`]), the cached
+    /// set, so that the next draw from it computes nothing. Moves neither
+    /// the dimension nor the kept set.
+    #[inline]
+    pub fn prime(&mut self, (set, values): (u32, [f32; 4])) {
+        debug_assert!(self.sobol);
+        self.cached_set = set;
+        self.cached = values;
     }
 
     /// The two numbers of dimensions `d` and `d + 1` (`d` even), then
@@ -490,6 +639,79 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The sets drawn sixteen at a time ([`sobol_sets`]) are those drawn
+    /// one at a time, bit for bit, on every SIMD path the CPU has, in
+    /// full groups and in a partial one, and priming a sampler with one
+    /// gives the draws it would have made.
+    #[test]
+    fn sets_drawn_side_by_side_are_the_sets_drawn_alone() {
+        let mut z = 11u64;
+        let seeds: Vec<SamplerSeed> = (0..53u32)
+            .map(|k| {
+                z = mix64(z);
+                SamplerSeed::new(
+                    SamplerKind::Sobol,
+                    z,
+                    z as u32 >> 7,
+                    (z >> 40) as u32 % 4096 + k,
+                )
+            })
+            .collect();
+        let sets: Vec<u32> = (0..53u32).map(|k| k * 0x0100_0193 % 0x0900_0000).collect();
+        let requests: Vec<SetRequest> = seeds
+            .iter()
+            .zip(&sets)
+            .map(|(s, &set)| s.sobol_request(set).expect("Sobol"))
+            .collect();
+        let alone: Vec<[u32; 4]> = seeds
+            .iter()
+            .zip(&sets)
+            .map(|(s, &set)| s.sampler().set_of_four(4 * set).map(f32::to_bits))
+            .collect();
+        type Path = fn(&[SetRequest], &mut [[f32; 4]]);
+        let mut paths: Vec<(&str, Path)> = vec![("portable", sobol_sets_with)];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use crate::core::simd::{Isa, supported};
+            if supported(Isa::Avx2) {
+                // SAFETY: only called where the CPU has AVX2 and FMA.
+                #[allow(unsafe_code)]
+                paths.push(("avx2", |r, o| unsafe { sobol_sets_avx2(r, o) }));
+            }
+            if supported(Isa::Avx512) {
+                // SAFETY: only called where the CPU has AVX-512F.
+                #[allow(unsafe_code)]
+                paths.push(("avx512", |r, o| unsafe { sobol_sets_avx512(r, o) }));
+            }
+        }
+        for (name, path) in paths {
+            for n in [53, 16, 7] {
+                let mut out = vec![[0.0f32; 4]; n];
+                path(&requests[..n], &mut out);
+                for (k, o) in out.iter().enumerate() {
+                    assert_eq!(o.map(f32::to_bits), alone[k], "{name}: request {k} of {n}");
+                }
+            }
+        }
+        let mut out = vec![[0.0f32; 4]; 53];
+        sobol_sets(&requests, &mut out);
+        for k in 0..53 {
+            let mut primed = seeds[k].sampler();
+            primed.prime((sets[k], out[k]));
+            let mut fresh = seeds[k].sampler();
+            for d in 4 * sets[k]..4 * sets[k] + 4 {
+                primed.set_dimension(d);
+                fresh.set_dimension(d);
+                assert_eq!(primed.next_f32().to_bits(), fresh.next_f32().to_bits());
+            }
+        }
+        assert!(
+            SamplerSeed::new(SamplerKind::Hash, 1, 2, 3)
+                .sobol_request(0)
+                .is_none()
+        );
     }
 
     /// The Sobol sampler's 64 samples of one pixel put exactly one point

@@ -302,6 +302,13 @@ pub fn bounce_dimension(settings: &RenderSettings, depth: u32) -> u32 {
 /// the media's (`volume::medium_dimension`).
 pub const DIRECTION_DIMENSION: u32 = 0x2000_0000;
 
+/// The Sobol set (dimensions `4 set .. 4 set + 4`) that holds the BSDF
+/// direction of a surface vertex at bounce `depth` ([`direction_numbers`]).
+#[inline]
+pub fn direction_set(depth: u32) -> u32 {
+    DIRECTION_DIMENSION.wrapping_add(4 * (depth / 2)) / 4
+}
+
 /// The two numbers from which a surface vertex at bounce `depth` draws
 /// its BSDF direction. Bounces `2j` and `2j + 1` share one Sobol set of
 /// four: `(u, v)` of the first, then `(u, v)` of the second, so that the
@@ -315,7 +322,7 @@ pub const DIRECTION_DIMENSION: u32 = 0x2000_0000;
 /// bounce of a pair finds it without computing it again.
 #[inline]
 pub fn direction_numbers(sampler: &mut Sampler, depth: u32) -> Vec2 {
-    let set = sampler.set_of_four_kept(DIRECTION_DIMENSION.wrapping_add(4 * (depth / 2)));
+    let set = sampler.set_of_four_kept(4 * direction_set(depth));
     if depth.is_multiple_of(2) {
         Vec2::new(set[0], set[1])
     } else {
