@@ -56,14 +56,36 @@ impl Interaction {
     /// [`Hit::uv_density`], is the footprint in texture coordinates.
     #[inline]
     pub fn with_cone(scene: &RenderScene, ray: &Ray, hit: &Hit, cone: RayCone) -> Self {
-        let wo = (-ray.direction).normalize();
+        Self::with_cone_at(
+            scene,
+            ray.direction,
+            hit,
+            cone,
+            hit.t * ray.direction.length(),
+        )
+    }
+
+    /// [`Interaction::with_cone`] of a hit at `distance` from the ray's
+    /// origin along `direction` (`hit.t` times the direction's length,
+    /// computed as `with_cone` computes it), for a caller that has the
+    /// distance already: multiplying it by the length again would change
+    /// its last bit wherever the direction is not exactly of unit length.
+    #[inline]
+    pub fn with_cone_at(
+        scene: &RenderScene,
+        direction: Vec3A,
+        hit: &Hit,
+        cone: RayCone,
+        distance: f32,
+    ) -> Self {
+        let wo = (-direction).normalize();
         let front_face = hit.geometric_normal.dot(wo) >= 0.0;
         let (ng, ns) = if front_face {
             (hit.geometric_normal, hit.shading_normal)
         } else {
             (-hit.geometric_normal, -hit.shading_normal)
         };
-        let cone = cone.at(hit.t * ray.direction.length());
+        let cone = cone.at(distance);
         let cos = ng.dot(wo).abs().max(1.0 / 64.0);
         let width_uv = cone.width * hit.uv_density / cos;
         Self {

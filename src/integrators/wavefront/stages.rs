@@ -511,7 +511,7 @@ pub struct ShadeInput<'a> {
 /// bytes per hit, 2.7% of a path-traced `cornell.toml`).
 #[inline(always)]
 fn interaction(scene: &RenderScene, h: &HitItem) -> Interaction {
-    Interaction::with_cone(scene, &Ray::new(h.point, h.direction), &h.hit(), h.cone)
+    Interaction::with_cone_at(scene, h.direction, &h.hit(), h.cone, h.distance)
 }
 
 /// Attenuates `h`'s throughput by what its segment crossed.
