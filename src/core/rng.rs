@@ -344,8 +344,13 @@ fn sobol_sets_with(requests: &[SetRequest], out: &mut [[f32; 4]]) {
         let lane = |l: usize| req[l.min(req.len() - 1)];
         let sample: [u32; SET_LANES] = std::array::from_fn(|l| lane(l).sample);
         let seed: [u32; SET_LANES] = std::array::from_fn(|l| lane(l).seed);
-        let sets = sobol_set_lanes(&sample, &seed);
-        out.copy_from_slice(&sets[..req.len()]);
+        // Dimension by dimension (one register each), then lane by lane:
+        // writing each lane's four numbers in the lane loops had made the
+        // compiler scatter them.
+        let dims = sobol_set_lanes(&sample, &seed);
+        for (l, o) in out.iter_mut().enumerate() {
+            *o = [dims[0][l], dims[1][l], dims[2][l], dims[3][l]];
+        }
     }
 }
 
@@ -373,8 +378,9 @@ fn owen_scramble_lane(mut n: u32, scramble: u32) -> u32 {
 /// [`sobol_set`] of `SET_LANES` (sample, seed) pairs, in loops over the
 /// lanes that the compiler widens: the index shuffle, the two table rows,
 /// the per-dimension scramble and the conversion, each for every lane.
+/// Dimension-major: `[k][l]` is dimension `k` of lane `l`.
 #[inline(always)]
-fn sobol_set_lanes(sample: &[u32; SET_LANES], seed: &[u32; SET_LANES]) -> [[f32; 4]; SET_LANES] {
+fn sobol_set_lanes(sample: &[u32; SET_LANES], seed: &[u32; SET_LANES]) -> [[f32; SET_LANES]; 4] {
     let mut shuffled = [0u32; SET_LANES];
     for l in 0..SET_LANES {
         debug_assert!(sample[l] < SOBOL_SAMPLES);
@@ -392,12 +398,12 @@ fn sobol_set_lanes(sample: &[u32; SET_LANES], seed: &[u32; SET_LANES]) -> [[f32;
             sobol[k][l] = hi[k] ^ lo[k];
         }
     }
-    let mut out = [[0.0f32; 4]; SET_LANES];
-    for (k, dim) in sobol.iter().enumerate() {
+    let mut out = [[0.0f32; SET_LANES]; 4];
+    for (k, (dim, out)) in sobol.iter().zip(&mut out).enumerate() {
         for l in 0..SET_LANES {
             let scramble = hash_lane(scramble_seeds(seed[l])[k]);
             let n = owen_scramble_lane(dim[l], scramble).reverse_bits();
-            out[l][k] = f32::from_bits((n >> 9) | 0x3f80_0000) - 1.0;
+            out[l] = f32::from_bits((n >> 9) | 0x3f80_0000) - 1.0;
         }
     }
     out
