@@ -92,12 +92,33 @@ pub fn generate_camera_rays(
             });
     }
     let seeds: &[SamplerSeed] = seeds;
+    // Path transport: the film position's Sobol set (set 0, which the
+    // lens shares) of the chunk's paths, drawn sixteen side by side
+    // before the rays are made, as the shading stages draw theirs
+    // (`PrimedSets`); none for one sample per pixel (the pixel centre).
+    let film_sets = |range: std::ops::Range<usize>| {
+        let mut sets = Vec::new();
+        if settings.spp > 1 && seeds.len() >= range.end {
+            let requests: Option<Vec<SetRequest>> =
+                seeds[range].iter().map(|s| s.sobol_request(0)).collect();
+            if let Some(requests) = requests {
+                sets.resize(requests.len(), [0.0; 4]);
+                sobol_sets(&requests, &mut sets);
+            }
+        }
+        sets
+    };
     out.fill_chunks(count, |range| {
-        keys(range.start).zip(range).map(|(k, local)| {
+        let sets = film_sets(range.clone());
+        let start = range.start;
+        keys(range.start).zip(range).map(move |(k, local)| {
             let mut sampler = match seeds.get(local) {
                 Some(s) => s.sampler(),
                 None => seed(&k).sampler(),
             };
+            if let Some(&set) = sets.get(local - start) {
+                sampler.prime((0, set));
+            }
             RayItem {
                 ray: camera_ray_paired(camera, k.x, k.y, settings.spp, &mut sampler),
                 throughput: Color::ONE,
