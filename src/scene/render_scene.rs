@@ -261,6 +261,13 @@ impl RenderScene {
         }
     }
 
+    /// The surface sample of an untextured material, the same everywhere
+    /// on it ([`RenderScene::surface`] gives it), or `None`.
+    #[inline]
+    pub fn cached_surface(&self, material: u32) -> Option<&SurfaceSample> {
+        self.surfaces[material as usize].as_ref()
+    }
+
     /// Materials referenced by instances.
     pub fn materials(&self) -> &[Material] {
         &self.materials
