@@ -132,6 +132,7 @@ struct Rays16 {
 const BOX_SLACK: f32 = 1e-5;
 
 impl Rays16 {
+    #[inline(always)]
     fn new(group: &[u32], rays: &[Ray]) -> Self {
         let mut r = Rays16 {
             o: [[0.0; WIDTH]; 3],
@@ -323,6 +324,10 @@ struct Group {
 }
 
 impl Group {
+    /// Inlined into the batch's SIMD entry points: out of line it ran
+    /// with the baseline instruction set and returned its 1 KB through a
+    /// `memcpy`.
+    #[inline(always)]
     fn new(sorted: &Sorted, group: &[u32], rays: &[Ray]) -> Self {
         Group {
             lanes: PermutedLanes16::new(sorted.wt.as_slice(), group),
