@@ -865,6 +865,8 @@ impl WatertightRay {
 pub struct Shears16 {
     sx: [f32; 16],
     sy: [f32; 16],
+    /// `d[axis][lane]`: the directions, for the hits' distances.
+    d: [[f32; 16]; 3],
 }
 
 impl Shears16 {
@@ -874,10 +876,14 @@ impl Shears16 {
         let mut s = Shears16 {
             sx: [0.0; 16],
             sy: [0.0; 16],
+            d: [[0.0; 16]; 3],
         };
         for (l, r) in rays.iter().enumerate() {
             s.sx[l] = r.shear.x;
             s.sy[l] = r.shear.y;
+            for a in 0..3 {
+                s.d[a][l] = r.direction[a];
+            }
         }
         s
     }
@@ -933,6 +939,31 @@ impl WatertightRay {
                 continue;
             }
             let corners = block.corners(j);
+            // Lanes with every edge clear of its bound finish side by side;
+            // the others (an edge within rounding) take the careful path.
+            let mut clean = 0;
+            for l in 0..16 {
+                let c =
+                    e[0][l].abs() > b[0][l] && e[1][l].abs() > b[1][l] && e[2][l].abs() > b[2][l];
+                clean |= (c as u32) << l;
+            }
+            let clean = clean & pass;
+            // (A lane alone finishes faster by itself.)
+            let clean = if clean.count_ones() >= 2 { clean } else { 0 };
+            pass &= !clean;
+            if clean != 0 {
+                let lead = clean.trailing_zeros() as usize;
+                let (hit, t, b1, b2) =
+                    finish_lanes16::<AVX512>(shears, corners, rays[lead].origin, &e, t_min, t_max);
+                let mut hit = hit & clean;
+                while hit != 0 {
+                    let l = hit.trailing_zeros() as usize;
+                    hit &= hit - 1;
+                    t_max[l] = t[l];
+                    out[l] = (j as u32, t[l], b1[l], b2[l]);
+                    found |= 1 << l;
+                }
+            }
             while pass != 0 {
                 let l = pass.trailing_zeros() as usize;
                 pass &= pass - 1;
@@ -946,6 +977,140 @@ impl WatertightRay {
             }
         }
         found
+    }
+}
+
+/// The end of the test of triangle `p` for 16 lanes that share `origin`
+/// and whose edge functions `e` are all clear of their rounding bounds:
+/// the operations of [`WatertightRay::finish_one`]'s clean path lane by
+/// lane (the plane's normal and its distance from the shared origin are
+/// one value for all lanes), so the same bits. Returns the lanes with a
+/// hit inside `(t_min, t_max)` and each lane's `t`, `b1`, `b2` (garbage in
+/// the others).
+#[allow(clippy::type_complexity)]
+#[inline(always)]
+fn finish_lanes16<const AVX512: bool>(
+    shears: &Shears16,
+    p: [Vec3A; 3],
+    origin: Vec3A,
+    e: &[[f32; 16]; 3],
+    t_min: &[f32; 16],
+    t_max: &[f32; 16],
+) -> (u32, [f32; 16], [f32; 16], [f32; 16]) {
+    // As `plane_t_within`: the normal and the numerator in f64.
+    let p0 = p[0].as_dvec3();
+    let n = (p[1].as_dvec3() - p0).cross(p[2].as_dvec3() - p0);
+    let num = n.dot(p0 - origin.as_dvec3());
+    #[cfg(target_arch = "x86_64")]
+    if AVX512 {
+        // SAFETY: `AVX512` is set only by the AVX-512 entry points, which
+        // run only on CPUs with AVX-512F (`simd::use_avx512`).
+        #[allow(unsafe_code)]
+        return unsafe { finish_lanes16_avx512(shears, n, num, e, t_min, t_max) };
+    }
+    let mut hit = 0;
+    let mut t = [0.0f32; 16];
+    let mut b1 = [0.0f32; 16];
+    let mut b2 = [0.0f32; 16];
+    for l in 0..16 {
+        let [u, v, w] = [e[0][l], e[1][l], e[2][l]];
+        let det = u + v + w;
+        let d = [shears.d[0][l], shears.d[1][l], shears.d[2][l]];
+        let den = n.x * d[0] as f64 + n.y * d[1] as f64 + n.z * d[2] as f64;
+        let negative = (num < 0.0 && den > 0.0) || (num > 0.0 && den < 0.0);
+        let positive = (num > 0.0 && den > 0.0) || (num < 0.0 && den < 0.0);
+        let beyond =
+            positive && num.abs() > den.abs() * t_max[l] as f64 * (1.0 + f64::EPSILON * 8.0);
+        let tl = (num / den) as f32;
+        let ok = det != 0.0
+            && det.is_finite()
+            && !(negative && t_min[l] >= 0.0)
+            && !beyond
+            && tl > t_min[l]
+            && tl < t_max[l];
+        let inv = 1.0 / det;
+        hit |= (ok as u32) << l;
+        t[l] = tl;
+        b1[l] = v * inv;
+        b2[l] = w * inv;
+    }
+    (hit, t, b1, b2)
+}
+
+/// [`finish_lanes16`] in AVX-512 registers (the f64 parts eight lanes at
+/// a time): the same operations.
+///
+/// # Safety
+/// Only on a CPU with AVX-512F, inlined into an AVX-512 entry point.
+#[cfg(target_arch = "x86_64")]
+#[allow(clippy::type_complexity)]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn finish_lanes16_avx512(
+    shears: &Shears16,
+    n: glam::DVec3,
+    num: f64,
+    e: &[[f32; 16]; 3],
+    t_min: &[f32; 16],
+    t_max: &[f32; 16],
+) -> (u32, [f32; 16], [f32; 16], [f32; 16]) {
+    // SAFETY: the caller runs on a CPU with AVX-512F.
+    unsafe {
+        use std::arch::x86_64::*;
+        let ld = |x: &[f32; 16]| -> __m512 { std::mem::transmute(*x) };
+        let (u, v, w) = (ld(&e[0]), ld(&e[1]), ld(&e[2]));
+        let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
+        let zero = _mm512_setzero_ps();
+        let mut ok = _mm512_cmp_ps_mask::<_CMP_NEQ_OQ>(det, zero)
+            & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_abs_ps(det), _mm512_set1_ps(f32::INFINITY));
+        let (tmin, tmax) = (ld(t_min), ld(t_max));
+        let numv = _mm512_set1_pd(num);
+        let (nx, ny, nz) = (
+            _mm512_set1_pd(n.x),
+            _mm512_set1_pd(n.y),
+            _mm512_set1_pd(n.z),
+        );
+        let zero_d = _mm512_setzero_pd();
+        let scale = _mm512_set1_pd(1.0 + f64::EPSILON * 8.0);
+        let num_pos = num > 0.0;
+        let num_neg = num < 0.0;
+        let mut t = [0.0f32; 16];
+        for h in 0..2 {
+            let half = |x: __m512| -> __m512d {
+                let x: [__m256; 2] = std::mem::transmute(x);
+                _mm512_cvtps_pd(x[h])
+            };
+            let dx = half(ld(&shears.d[0]));
+            let dy = half(ld(&shears.d[1]));
+            let dz = half(ld(&shears.d[2]));
+            let den = _mm512_add_pd(
+                _mm512_add_pd(_mm512_mul_pd(nx, dx), _mm512_mul_pd(ny, dy)),
+                _mm512_mul_pd(nz, dz),
+            );
+            let den_pos = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(den, zero_d);
+            let den_neg = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(den, zero_d);
+            let negative = if num_neg { den_pos } else { 0 } | if num_pos { den_neg } else { 0 };
+            let positive = if num_pos { den_pos } else { 0 } | if num_neg { den_neg } else { 0 };
+            let ahead = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(tmin, zero) >> (8 * h);
+            let far = _mm512_mul_pd(_mm512_mul_pd(_mm512_abs_pd(den), half(tmax)), scale);
+            let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(_mm512_abs_pd(numv), far);
+            let reject = (negative & ahead as u8) | (positive & beyond);
+            ok &= !((reject as u16) << (8 * h));
+            let th = _mm512_cvtpd_ps(_mm512_div_pd(numv, den));
+            t[8 * h..8 * h + 8].copy_from_slice(&std::mem::transmute::<__m256, [f32; 8]>(th));
+        }
+        let tv = ld(&t);
+        ok &=
+            _mm512_cmp_ps_mask::<_CMP_GT_OQ>(tv, tmin) & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(tv, tmax);
+        let inv = _mm512_div_ps(_mm512_set1_ps(1.0), det);
+        let b1 = _mm512_mul_ps(v, inv);
+        let b2 = _mm512_mul_ps(w, inv);
+        (
+            ok as u32,
+            t,
+            std::mem::transmute::<__m512, [f32; 16]>(b1),
+            std::mem::transmute::<__m512, [f32; 16]>(b2),
+        )
     }
 }
 
