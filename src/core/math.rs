@@ -51,6 +51,16 @@ pub fn one_octant(rays: &[Ray]) -> bool {
     rays.iter().all(|r| octant(r) == first)
 }
 
+/// Whether every ray of `rays` starts at the same point, bit for bit (the
+/// camera rays of a pinhole).
+pub fn one_origin(rays: &[Ray]) -> bool {
+    let Some(first) = rays.first() else {
+        return true;
+    };
+    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    rays.iter().all(|r| bits(r) == bits(first))
+}
+
 /// A ray cone (Akenine-Möller et al., "Texture Level of Detail Strategies
 /// for Real-Time Ray Tracing", Ray Tracing Gems 2019): the footprint a
 /// ray stands for, a cone of `width` at the ray's origin widening by
