@@ -6,6 +6,7 @@
 
 pub mod build;
 pub mod bvh8;
+pub(crate) mod frustum;
 pub mod grid;
 pub mod kdtree;
 pub mod mailbox;

@@ -18,7 +18,8 @@ use std::mem::MaybeUninit;
 use glam::{Vec3A, Vec4};
 
 use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
-use crate::accel::node::{NodeRay, max_keep, max4, min_keep, min4};
+use crate::accel::frustum::Frustum;
+use crate::accel::node::{NodeRay, max4, min_keep, min4};
 use crate::accel::single::traverse_from;
 use crate::core::math::Ray;
 
@@ -112,135 +113,6 @@ impl Lanes {
     }
 }
 
-/// Bounds of a packet's lanes for [`Frustum::test`]: per axis, the
-/// origin (shifted by the margin) that gives every lane's near and far
-/// slab distances their lower and upper bounds, and the smallest and
-/// largest reciprocal direction component, which share one sign.
-#[derive(Clone, Copy, Debug)]
-struct Frustum {
-    /// Per axis, the largest `o_near` over the lanes going up, the
-    /// smallest going down.
-    o_near: [f32; 3],
-    /// Per axis, the smallest `o_far` over the lanes going up, the
-    /// largest going down.
-    o_far: [f32; 3],
-    /// Per axis, the smallest and largest reciprocal direction.
-    inv_lo: [f32; 3],
-    inv_hi: [f32; 3],
-    /// The smallest interval start of the lanes.
-    t_min: f32,
-}
-
-impl Frustum {
-    /// The bounds of the lanes `alive` of `lanes` (one octant): `None`
-    /// when a reciprocal direction is not finite (a ray along an axis),
-    /// where the bounds' products could be NaN.
-    #[inline(always)]
-    fn new(lanes: &Lanes, packet: &Packet, alive: LaneMask, octant: u8) -> Option<Self> {
-        let mut f = Frustum {
-            o_near: [0.0; 3],
-            o_far: [0.0; 3],
-            inv_lo: [f32::INFINITY; 3],
-            inv_hi: [f32::NEG_INFINITY; 3],
-            t_min: f32::INFINITY,
-        };
-        let mut finite = true;
-        for a in 0..3 {
-            let down = octant >> a & 1 == 1;
-            let (mut on_lo, mut on_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            let (mut of_lo, mut of_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for_each_lane(
-                alive,
-                #[inline(always)]
-                |l| {
-                    let inv = lanes.inv[a][l];
-                    finite &= inv.is_finite();
-                    f.inv_lo[a] = f.inv_lo[a].min(inv);
-                    f.inv_hi[a] = f.inv_hi[a].max(inv);
-                    on_lo = on_lo.min(lanes.o_near[a][l]);
-                    on_hi = on_hi.max(lanes.o_near[a][l]);
-                    of_lo = of_lo.min(lanes.o_far[a][l]);
-                    of_hi = of_hi.max(lanes.o_far[a][l]);
-                },
-            );
-            // A lane's near distance `(p - o) inv` is smallest for the
-            // largest `o` going up (inv > 0), the smallest going down;
-            // its far distance largest the other way round.
-            (f.o_near[a], f.o_far[a]) = if down { (on_lo, of_hi) } else { (on_hi, of_lo) };
-        }
-        for_each_lane(
-            alive,
-            #[inline(always)]
-            |l| f.t_min = f.t_min.min(packet.t_min[l]),
-        );
-        finite.then_some(f)
-    }
-
-    /// The children of `node` that some lane may enter: a child is left
-    /// out only when the largest over the axes of the lanes' smallest
-    /// near distance exceeds the smallest over the axes of their largest
-    /// far distance, so that every lane's own entry exceeds its exit.
-    /// Each bound is a product `(plane - o) inv` at an end of the lanes'
-    /// ranges, rounded as the lanes' own ([`test_child`]: a difference,
-    /// then a product), and rounding is monotone, so the bounds hold for
-    /// the rounded distances too: the children every lane misses, and no
-    /// other, can be left out. Empty slots (infinite planes) are left
-    /// out.
-    #[inline(always)]
-    fn test<const AVX: bool>(&self, node: &Node8, near: &[usize; 3]) -> u32 {
-        #[cfg(target_arch = "x86_64")]
-        if AVX {
-            // SAFETY: `AVX` is set only by the AVX2 entry points, which run
-            // only on CPUs with AVX2 and FMA (`simd::use_avx2`).
-            #[allow(unsafe_code)]
-            return unsafe { self.test_avx2(node, near) };
-        }
-        let mut mask = 0;
-        for c in 0..WIDTH {
-            let mut enter = self.t_min;
-            let mut exit = f32::INFINITY;
-            for (a, &row) in near.iter().enumerate() {
-                let dn = node.planes[row][c] - self.o_near[a];
-                enter = max_keep(min_keep(dn * self.inv_lo[a], dn * self.inv_hi[a]), enter);
-                let df = node.planes[(row + 3) % 6][c] - self.o_far[a];
-                exit = min_keep(max_keep(df * self.inv_lo[a], df * self.inv_hi[a]), exit);
-            }
-            mask |= ((enter <= exit) as u32) << c;
-        }
-        mask
-    }
-
-    /// [`Self::test`] in 8-wide AVX registers.
-    ///
-    /// # Safety
-    /// Only on a CPU with AVX2 and FMA, inlined into an AVX2 entry point.
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    #[allow(unsafe_code)]
-    unsafe fn test_avx2(&self, node: &Node8, near: &[usize; 3]) -> u32 {
-        // SAFETY: the caller runs on a CPU with AVX2 and FMA.
-        unsafe {
-            use std::arch::x86_64::*;
-            let mut enter = _mm256_set1_ps(self.t_min);
-            let mut exit = _mm256_set1_ps(f32::INFINITY);
-            for (a, &row) in near.iter().enumerate() {
-                let lo = _mm256_set1_ps(self.inv_lo[a]);
-                let hi = _mm256_set1_ps(self.inv_hi[a]);
-                let np: __m256 = bytemuck::cast(node.planes[row]);
-                let fp: __m256 = bytemuck::cast(node.planes[(row + 3) % 6]);
-                let dn = _mm256_sub_ps(np, _mm256_set1_ps(self.o_near[a]));
-                let df = _mm256_sub_ps(fp, _mm256_set1_ps(self.o_far[a]));
-                // min(a, b) = a < b ? a : b, as `min_keep` (no NaN here).
-                let n = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
-                let f = _mm256_max_ps(_mm256_mul_ps(df, lo), _mm256_mul_ps(df, hi));
-                enter = _mm256_max_ps(n, enter);
-                exit = _mm256_min_ps(f, exit);
-            }
-            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32
-        }
-    }
-}
-
 /// A pending subtree: child reference, lanes, smallest entry distance.
 type Pending = (u32, LaneMask, f32);
 
@@ -304,7 +176,14 @@ pub fn traverse<const AVX: bool, const FRUSTUM: bool>(
     // lane tests (closest hits in mesh BVHs: see `Frustum`; the top level
     // and shadow packets, whose rays are less alike, measured slower).
     let frustum = if FRUSTUM {
-        Frustum::new(&lanes, packet, alive, octant)
+        Frustum::new::<LANES, false>(
+            &lanes.o_near,
+            &lanes.o_far,
+            &lanes.inv,
+            lanes.near,
+            alive,
+            &packet.t_min,
+        )
     } else {
         None
     };
@@ -368,7 +247,7 @@ pub fn traverse<const AVX: bool, const FRUSTUM: bool>(
         // A `match`, not `map_or` with a closure: a closure left out of
         // line loses the AVX2 entry point's features.
         let maybe = match &frustum {
-            Some(f) => f.test::<AVX>(node, &lanes.near),
+            Some(f) => f.test::<AVX>(node, f32::INFINITY).0,
             None => u32::MAX,
         };
         for c in 0..WIDTH {
@@ -642,20 +521,27 @@ mod tests {
             }
             let packet = Packet::new(&rays, &[0.0; LANES], &[f32::INFINITY; LANES]);
             let lanes = Lanes::new(&node_rays, ALL_LANES);
-            let f = Frustum::new(&lanes, &packet, ALL_LANES, node_rays[0].octant)
-                .expect("no ray along an axis");
+            let f = Frustum::new::<LANES, false>(
+                &lanes.o_near,
+                &lanes.o_far,
+                &lanes.inv,
+                lanes.near,
+                ALL_LANES,
+                &packet.t_min,
+            )
+            .expect("no ray along an axis");
             packets += 1;
             for node in &bvh.nodes {
-                let mask = f.test::<false>(node, &lanes.near);
+                let mask = f.test::<false>(node, f32::INFINITY).0;
                 #[cfg(target_arch = "x86_64")]
                 if crate::core::simd::use_avx2() {
                     #[target_feature(enable = "avx2,fma")]
-                    fn avx2(f: &Frustum, node: &Node8, near: &[usize; 3]) -> u32 {
-                        f.test::<true>(node, near)
+                    fn avx2(f: &Frustum, node: &Node8) -> u32 {
+                        f.test::<true>(node, f32::INFINITY).0
                     }
                     // SAFETY: the CPU has AVX2 and FMA (checked above).
                     #[allow(unsafe_code)]
-                    let m = unsafe { avx2(&f, node, &lanes.near) };
+                    let m = unsafe { avx2(&f, node) };
                     assert_eq!(m, mask, "the AVX2 frustum test differs");
                 }
                 for c in 0..WIDTH {
