@@ -89,6 +89,27 @@ impl RenderScene {
         closest_in_geometry::<AVX>(inst, &to_object(inst, ray), t_min, t_max, brute_force)
     }
 
+    /// The `t` of [`RenderScene::intersect_instance`]'s hit, without
+    /// building the hit where that is cheaper (planes and disks).
+    #[inline(always)]
+    fn instance_t<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<f32> {
+        let inst = &self.instances[index as usize];
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) if !self.has_alpha(inst) => {
+                s.intersect_t(&to_object(inst, ray), t_min, t_max)
+            }
+            _ => self
+                .intersect_instance::<AVX>(index, ray, t_min, t_max)
+                .map(|(t, _)| t),
+        }
+    }
+
     /// [`RenderScene::intersect_instance_with`] for an instance whose
     /// material has an alpha mode: the closest hit that is not cut away,
     /// found by searching again beyond each cut-away hit (each raises
@@ -364,16 +385,24 @@ impl RenderScene {
             &Mesh,
             &mut [Option<(f32, u32, LocalHit)>],
         ),
-    ) where
+    ) -> [(u32, f32); N]
+    where
         PacketOf<N>: PacketTraversal,
     {
         let n = rays.len().min(N);
         let mut t_max = [f32::INFINITY; N];
+        // Each lane's nearest unbounded instance and the interval end it
+        // was found in: its hit is built at the end, by the same search
+        // again, and only where nothing nearer was found. (Building it
+        // here and moving it through `best` stalled on store forwarding:
+        // 5% of the frame-loop benchmark, whose every ray meets the
+        // ground plane.)
+        let mut unbounded = [(u32::MAX, 0.0f32); N];
         for (l, ray) in rays[..n].iter().enumerate() {
             for &i in &self.tlas.unbounded {
-                if let Some((t, h)) = self.intersect_instance::<AVX>(i, ray, 0.0, t_max[l]) {
+                if let Some(t) = self.instance_t::<AVX>(i, ray, 0.0, t_max[l]) {
+                    unbounded[l] = (i, t_max[l]);
                     t_max[l] = t;
-                    best[l] = Some((t, i, h));
                 }
             }
         }
@@ -427,6 +456,24 @@ impl RenderScene {
                 0
             },
         );
+        unbounded
+    }
+
+    /// The hit on unbounded instance `u.0` (`u32::MAX`: none) that
+    /// [`Self::top_level_packet`] found for `ray` within `u.1`: the same
+    /// search again.
+    #[inline(always)]
+    fn unbounded_hit<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        u: (u32, f32),
+    ) -> Option<(f32, u32, LocalHit)> {
+        let (i, reach) = u;
+        if i == u32::MAX {
+            return None;
+        }
+        self.intersect_instance::<AVX>(i, ray, 0.0, reach)
+            .map(|(t, h)| (t, i, h))
     }
 
     #[inline(always)]
@@ -528,7 +575,7 @@ impl RenderScene {
     {
         let n = rays.len().min(N);
         let mut best: [Option<(f32, u32, LocalHit)>; N] = [None; N];
-        self.top_level_packet::<N, AVX, AVX512>(
+        let unbounded = self.top_level_packet::<N, AVX, AVX512>(
             rays,
             &mut best,
             #[inline(always)]
@@ -547,8 +594,15 @@ impl RenderScene {
                 );
             },
         );
+        // A lane without a hit above has its unbounded instance's, if any
+        // (every hit recorded is nearer).
         for (l, o) in out[..n].iter_mut().enumerate() {
-            *o = best[l].map(|(t, i, h)| self.finish_hit(t, i, h));
+            *o = match best[l] {
+                Some((t, i, h)) => Some(self.finish_hit(t, i, h)),
+                None => self
+                    .unbounded_hit::<AVX>(&rays[l], unbounded[l])
+                    .map(|(t, i, h)| self.finish_hit(t, i, h)),
+            };
         }
     }
 
@@ -640,7 +694,7 @@ impl RenderScene {
         for (p, packet_rays) in rays.chunks(LANES).enumerate() {
             let first = p * LANES;
             let best = &mut best[first..first + packet_rays.len()];
-            self.top_level_packet::<LANES, AVX, false>(
+            let unbounded = self.top_level_packet::<LANES, AVX, false>(
                 packet_rays,
                 best,
                 |p, lanes, index, inst, _, _| {
@@ -657,6 +711,13 @@ impl RenderScene {
                     )
                 },
             );
+            // The streams below start from the nearest of the unbounded
+            // instances' and the shapes' hits.
+            for (l, ray) in packet_rays.iter().enumerate() {
+                if best[l].is_none() {
+                    best[l] = self.unbounded_hit::<AVX>(ray, unbounded[l]);
+                }
+            }
         }
         // One stream per (instance, octant), in a fixed order.
         deferred.sort_unstable();

@@ -337,6 +337,17 @@ impl Shape {
         hit.is_finite().then_some(hit)
     }
 
+    /// The `t` of [`Shape::intersect`]'s hit, if any: the same answer.
+    /// The plane answers without building the hit (the other shapes call
+    /// [`Shape::intersect`]).
+    #[inline]
+    pub fn intersect_t(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<f32> {
+        match self {
+            Shape::Plane => planar::plane_t(ray, t_min, t_max),
+            _ => self.intersect(ray, t_min, t_max).map(|h| h.t),
+        }
+    }
+
     /// Whether [`Shape::intersect`] finds a hit: the same answer, for
     /// shadow rays. The plane and the disk answer without building the hit
     /// (which costs shadow rays of a scene with a ground plane a tenth of

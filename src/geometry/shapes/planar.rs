@@ -96,6 +96,15 @@ pub(super) fn intersect_plane(ray: &Ray, t_min: f32, t_max: f32) -> Option<Shape
     })
 }
 
+/// The `t` of `intersect_plane(..)` under [`Shape::intersect`]'s filter
+/// of non-finite hits (as [`occludes_plane`]), without building the hit.
+#[inline(always)]
+pub(super) fn plane_t(ray: &Ray, t_min: f32, t_max: f32) -> Option<f32> {
+    hit_y0(ray, t_min, t_max)
+        .filter(|(t, p)| t.is_finite() && p.x.is_finite() && p.z.is_finite())
+        .map(|(t, _)| t)
+}
+
 /// `intersect_plane(..).is_some()` under [`Shape::intersect`]'s filter
 /// of non-finite hits (`t`, point `(x, 0, z)`, `uv = (x, z)`), without
 /// building the hit.

@@ -1478,8 +1478,8 @@ fn non_finite_input_never_produces_nan() {
     }
 }
 
-/// `occludes` (shadow rays) answers exactly as `intersect(..).is_some()`
-/// for every shape: on random rays at ordinary and extreme scales
+/// `occludes` (shadow rays) answers exactly as `intersect(..).is_some()`,
+/// and `intersect_t` gives exactly its `t`, for every shape: on random rays at ordinary and extreme scales
 /// (origins and intervals up to 1e37), rays in the plane, parallel to it
 /// and starting on it, disks of zero, tiny and huge radius, and hits that
 /// `intersect` drops because the point overflows or the disk's `uv` is
@@ -1538,11 +1538,17 @@ fn occludes_answers_as_intersect_does() {
     let (mut hits, mut dropped, mut total) = (0, 0, 0);
     for shape in &shapes {
         for (r, (t_min, t_max)) in &cases {
-            let full = shape.intersect(r, *t_min, *t_max).is_some();
+            let hit = shape.intersect(r, *t_min, *t_max);
+            let full = hit.is_some();
             assert_eq!(
                 shape.occludes(r, *t_min, *t_max),
                 full,
                 "{shape:?} {r:?} ({t_min}, {t_max})"
+            );
+            assert_eq!(
+                shape.intersect_t(r, *t_min, *t_max).map(f32::to_bits),
+                hit.map(|h| h.t.to_bits()),
+                "intersect_t: {shape:?} {r:?} ({t_min}, {t_max})"
             );
             hits += full as u32;
             total += 1;
