@@ -22,7 +22,10 @@
 
 use crate::accel::bvh8::{Node8, WIDTH};
 use crate::accel::node::{max_keep, min_keep};
-use crate::accel::packet::LaneMask;
+
+/// A bit set of lanes (the packets' `LaneMask`; spelled out here, which
+/// the packets import, so that the two modules do not import each other).
+type LaneMask = u32;
 
 /// Bounds of the alive lanes of a packet, axis by axis (see the module
 /// documentation).
