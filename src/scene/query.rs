@@ -595,13 +595,16 @@ impl RenderScene {
             },
         );
         // A lane without a hit above has its unbounded instance's, if any
-        // (every hit recorded is nearer).
+        // (every hit recorded is nearer). The hits are built in place
+        // (`finish_hit_inline`): returned from a call, each was copied out
+        // of a temporary; inlined, the frame-loop benchmark ran 0.91-1.03x
+        // the time over ten alternating pairs (median 0.97x).
         for (l, o) in out[..n].iter_mut().enumerate() {
             *o = match best[l] {
-                Some((t, i, h)) => Some(self.finish_hit(t, i, h)),
+                Some((t, i, h)) => Some(self.finish_hit_inline(t, i, h)),
                 None => self
                     .unbounded_hit::<AVX>(&rays[l], unbounded[l])
-                    .map(|(t, i, h)| self.finish_hit(t, i, h)),
+                    .map(|(t, i, h)| self.finish_hit_inline(t, i, h)),
             };
         }
     }
