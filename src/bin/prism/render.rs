@@ -237,8 +237,9 @@ pub struct RenderArgs {
     bvh_quality: QualityArg,
     /// Acceleration structure over each mesh's triangles: the 8-wide BVH,
     /// an SAH kd-tree, a uniform grid, or none (test every triangle).
-    /// All give the same image. Default: the scene's `[settings] accel`,
-    /// else bvh.
+    /// All give the same image, except that only the BVH merges mesh
+    /// instances (`--merge-meshes`, whose hits may differ in their last
+    /// bits). Default: the scene's `[settings] accel`, else bvh.
     #[arg(long, value_enum, value_name = "STRUCTURE")]
     accel: Option<crate::args::AccelArg>,
     /// `--batch-paths`.
