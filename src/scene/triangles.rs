@@ -488,11 +488,11 @@ impl<'a> TriangleBatch<'a> {
                 }
             }
             for (l, &i) in group.iter().enumerate() {
-                let i = i as usize;
-                out[i] = if tied & (1 << l) != 0 {
-                    self.scene.intersect(&rays[i], 0.0, f32::INFINITY)
+                let o = &mut out[i as usize];
+                if tied & (1 << l) != 0 {
+                    *o = self.scene.intersect(&rays[i as usize], 0.0, f32::INFINITY);
                 } else if best[l].0 == u32::MAX {
-                    None
+                    *o = None;
                 } else {
                     let (triangle, b1, b2) = best[l];
                     let t = best_t[l];
@@ -502,8 +502,9 @@ impl<'a> TriangleBatch<'a> {
                         b1,
                         b2,
                     });
-                    Some(self.scene.finish_hit_inline(t, MERGED, local))
-                };
+                    let h = self.scene.finish_hit_inline(t, MERGED, local);
+                    *o = Some(h);
+                }
             }
         }
     }
