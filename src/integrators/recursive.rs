@@ -513,16 +513,23 @@ fn camera_packet_sums(
     let spp = settings.spp;
     // Without jitter or lens the camera ray uses no random numbers.
     let fixed = spp == 1 && !cam.has_lens();
+    let row = if fixed {
+        cam.pixel_centre_row::<COHERENT_LANES>(x, y, n)
+    } else {
+        None
+    };
     for s in samples {
-        let rays: [Ray; COHERENT_LANES] = std::array::from_fn(|l| {
-            let x = x + l.min(n - 1) as u32;
-            if fixed {
-                cam.ray(glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
-            } else {
-                let pixel = y * settings.width + x;
-                let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
-                camera_ray(cam, x, y, spp, &mut sampler)
-            }
+        let rays: [Ray; COHERENT_LANES] = row.unwrap_or_else(|| {
+            std::array::from_fn(|l| {
+                let x = x + l.min(n - 1) as u32;
+                if fixed {
+                    cam.ray(glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+                } else {
+                    let pixel = y * settings.width + x;
+                    let mut sampler = Sampler::with_kind(settings.sampler, settings.seed, pixel, s);
+                    camera_ray(cam, x, y, spp, &mut sampler)
+                }
+            })
         });
         counters.rays.camera += n as u64;
         let mut radiance = [Color::ZERO; COHERENT_LANES];
