@@ -2,7 +2,7 @@
 //! with a double-precision fallback for edge functions within their
 //! rounding error.
 
-use glam::{Vec3A, Vec4};
+use glam::{DVec3, Vec3A, Vec4};
 
 use crate::accel::node::max4;
 use crate::core::math::Ray;
@@ -238,6 +238,14 @@ impl WatertightRay {
     ) -> Option<f32> {
         let p0 = p0.as_dvec3();
         let n = (p1.as_dvec3() - p0).cross(p2.as_dvec3() - p0);
+        self.plane_t_normal(p0, n, t_min, t_max)
+    }
+
+    /// [`Self::plane_t_within`] from the plane's point `p0` and its
+    /// normal `n = (p1 - p0) x (p2 - p0)` already computed in f64 (the
+    /// same values, so the same bits).
+    #[inline(always)]
+    fn plane_t_normal(&self, p0: DVec3, n: DVec3, t_min: f32, t_max: f32) -> Option<f32> {
         let num = n.dot(p0 - self.origin.as_dvec3());
         let den = n.dot(self.direction.as_dvec3());
         let negative = (num < 0.0 && den > 0.0) || (num > 0.0 && den < 0.0);
@@ -600,6 +608,35 @@ impl WatertightRay {
         let uvw = [e[0][l], e[1][l], e[2][l]];
         let b = [bound[0][l], bound[1][l], bound[2][l]];
         self.finish_one(p, uvw, b, t_min, t_max)
+    }
+
+    /// [`Self::finish_lane`] for a triangle whose f64 normal `n = (p1 -
+    /// p0) x (p2 - p0)` (of its corners converted to f64) was computed
+    /// once beforehand: the same bits, without the cross product per lane.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn finish_lane_normal<const N: usize>(
+        &self,
+        p: [Vec3A; 3],
+        n: DVec3,
+        e: &[[f32; N]; 3],
+        bound: &[[f32; N]; 3],
+        l: usize,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let [u, v, w] = [e[0][l], e[1][l], e[2][l]];
+        let b = [bound[0][l], bound[1][l], bound[2][l]];
+        if !(u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2]) {
+            return self.intersect_careful(p, [u, v, w], b, t_min, t_max);
+        }
+        let det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let t = self.plane_t_normal(p[0].as_dvec3(), n, t_min, t_max)?;
+        let inv = 1.0 / det;
+        Some((t, v * inv, w * inv))
     }
 
     /// The end of the test of one triangle `p` whose edge test passed or

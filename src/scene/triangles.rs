@@ -40,6 +40,7 @@ use crate::geometry::triangle::{PermutedLanes16, Tri8, WatertightRay};
 use crate::scene::instance::{Hit, LocalHit};
 use crate::scene::merged::MERGED;
 use crate::scene::render_scene::RenderScene;
+use glam::DVec3;
 
 /// Merged meshes of at most this many triangles are tested in batches.
 /// Every group of rays pays at least the box test of every triangle, so
@@ -80,6 +81,9 @@ struct TriCull {
     /// `p0` ([`Rays16::crossing_plane`]).
     n: [f32; 3],
     p0: [f32; 3],
+    /// The normal in f64, as the edge test's finish computes it
+    /// ([`WatertightRay::finish_lane_normal`]).
+    nd: DVec3,
 }
 
 /// The rays of a call sorted by permutation: `order[starts[k]..starts[k
@@ -387,6 +391,7 @@ impl<'a> TriangleBatch<'a> {
                     hi: (hi + pad).to_array().map(f32::next_up),
                     n: n.as_vec3().to_array(),
                     p0: p0.to_array(),
+                    nd: n,
                 });
             }
         }
@@ -476,7 +481,9 @@ impl<'a> TriangleBatch<'a> {
                         best_t[l].next_up()
                     };
                     let w = &sorted.wt[group[l] as usize];
-                    if let Some((t, b1, b2)) = w.finish_lane(corners, &c.e, &c.b, l, 0.0, reach) {
+                    if let Some((t, b1, b2)) =
+                        w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach)
+                    {
                         if t < best_t[l] {
                             best_t[l] = t;
                             best[l] = (c.block.first + c.j as u32, b1, b2);
@@ -536,7 +543,7 @@ impl<'a> TriangleBatch<'a> {
                     let l = pass.trailing_zeros() as usize;
                     pass &= pass - 1;
                     let w = &sorted.wt[group[l] as usize];
-                    if w.finish_lane(corners, &c.e, &c.b, l, 0.0, reach[l])
+                    if w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach[l])
                         .is_some()
                     {
                         open &= !(1 << l);
