@@ -184,7 +184,7 @@ fn trace_camera_packet(
             out[l] = escaped(scene, ray);
             continue;
         };
-        let it = its[l].insert(Interaction::with_cone(scene, ray, hit, cone));
+        let it = Interaction::set_with_cone(&mut its[l], scene, ray, hit, cone);
         interior[l] = segment_transmittance(scene, ray, hit, it);
         if let Some(tr) = interior[l] {
             throughput[l] *= tr;
