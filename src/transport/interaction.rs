@@ -40,6 +40,43 @@ pub struct Interaction {
     pub offset_scale: f32,
 }
 
+/// What an [`Interaction`] holds besides its surface sample, and the
+/// texture footprint that sample is looked up with: computed once for
+/// [`Interaction::with_cone_at`] and [`Interaction::set_with_cone`].
+struct Frame {
+    wo: Vec3A,
+    front_face: bool,
+    ng: Vec3A,
+    ns: Vec3A,
+    cone: RayCone,
+    width_uv: f32,
+    offset_scale: f32,
+}
+
+impl Frame {
+    #[inline(always)]
+    fn new(scene: &RenderScene, direction: Vec3A, hit: &Hit, cone: RayCone, distance: f32) -> Self {
+        let wo = (-direction).normalize();
+        let front_face = hit.geometric_normal.dot(wo) >= 0.0;
+        let (ng, ns) = if front_face {
+            (hit.geometric_normal, hit.shading_normal)
+        } else {
+            (-hit.geometric_normal, -hit.shading_normal)
+        };
+        let cone = cone.at(distance);
+        let cos = ng.dot(wo).abs().max(1.0 / 64.0);
+        Frame {
+            wo,
+            front_face,
+            ng,
+            ns,
+            cone,
+            width_uv: cone.width * hit.uv_density / cos,
+            offset_scale: offset_scale(scene, hit),
+        }
+    }
+}
+
 impl Interaction {
     /// Orients the hit towards the incoming ray and evaluates its material
     /// at full texture resolution (no ray cone).
@@ -78,17 +115,15 @@ impl Interaction {
         cone: RayCone,
         distance: f32,
     ) -> Self {
-        let wo = (-direction).normalize();
-        let front_face = hit.geometric_normal.dot(wo) >= 0.0;
-        let (ng, ns) = if front_face {
-            (hit.geometric_normal, hit.shading_normal)
-        } else {
-            (-hit.geometric_normal, -hit.shading_normal)
-        };
-        let cone = cone.at(distance);
-        let cos = ng.dot(wo).abs().max(1.0 / 64.0);
-        let width_uv = cone.width * hit.uv_density / cos;
-        let offset_scale = offset_scale(scene, hit);
+        let Frame {
+            wo,
+            front_face,
+            ng,
+            ns,
+            cone,
+            width_uv,
+            offset_scale,
+        } = Frame::new(scene, direction, hit, cone, distance);
         let with = |surface| Self {
             point: hit.point,
             ng,
@@ -124,21 +159,19 @@ impl Interaction {
         cone: RayCone,
     ) -> &'s mut Self {
         let distance = hit.t * ray.direction.length();
-        let wo = (-ray.direction).normalize();
-        let front_face = hit.geometric_normal.dot(wo) >= 0.0;
-        let (ng, ns) = if front_face {
-            (hit.geometric_normal, hit.shading_normal)
-        } else {
-            (-hit.geometric_normal, -hit.shading_normal)
-        };
-        let cone = cone.at(distance);
-        let offset_scale = offset_scale(scene, hit);
+        let Frame {
+            wo,
+            front_face,
+            ng,
+            ns,
+            cone,
+            width_uv,
+            offset_scale,
+        } = Frame::new(scene, ray.direction, hit, cone, distance);
         let owned;
         let surface = match scene.cached_surface(hit.material) {
             Some(s) => s,
             None => {
-                let cos = ng.dot(wo).abs().max(1.0 / 64.0);
-                let width_uv = cone.width * hit.uv_density / cos;
                 owned = scene.surface(hit.material, hit.uv, width_uv);
                 &owned
             }
