@@ -625,18 +625,9 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let [u, v, w] = [e[0][l], e[1][l], e[2][l]];
+        let uvw = [e[0][l], e[1][l], e[2][l]];
         let b = [bound[0][l], bound[1][l], bound[2][l]];
-        if !(u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2]) {
-            return self.intersect_careful(p, [u, v, w], b, t_min, t_max);
-        }
-        let det = u + v + w;
-        if det == 0.0 || !det.is_finite() {
-            return None;
-        }
-        let t = self.plane_t_normal(p[0].as_dvec3(), n, t_min, t_max)?;
-        let inv = 1.0 / det;
-        Some((t, v * inv, w * inv))
+        self.finish_one_normal(p, n, uvw, b, t_min, t_max)
     }
 
     /// The end of the test of one triangle `p` whose edge test passed or
@@ -652,8 +643,24 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
+        let p0 = p[0].as_dvec3();
+        let n = (p[1].as_dvec3() - p0).cross(p[2].as_dvec3() - p0);
+        self.finish_one_normal(p, n, uvw, b, t_min, t_max)
+    }
+
+    /// [`Self::finish_one`] with the triangle's f64 normal `n = (p1 - p0)
+    /// x (p2 - p0)` given ([`Self::plane_t_within`]'s, the same bits).
+    #[inline(always)]
+    fn finish_one_normal(
+        &self,
+        p: [Vec3A; 3],
+        n: DVec3,
+        uvw: [f32; 3],
+        b: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
         let [u, v, w] = uvw;
-        let [p0, p1, p2] = p;
         if !(u.abs() > b[0] && v.abs() > b[1] && w.abs() > b[2]) {
             return self.intersect_careful(p, uvw, b, t_min, t_max);
         }
@@ -661,7 +668,7 @@ impl WatertightRay {
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let t = self.plane_t_within(p0, p1, p2, t_min, t_max)?;
+        let t = self.plane_t_normal(p[0].as_dvec3(), n, t_min, t_max)?;
         let inv = 1.0 / det;
         Some((t, v * inv, w * inv))
     }

@@ -75,6 +75,21 @@ impl Frame {
             offset_scale: offset_scale(scene, hit),
         }
     }
+
+    /// The interaction of `hit` with these parts and `surface`.
+    #[inline(always)]
+    fn interaction(&self, hit: &Hit, surface: SurfaceSample) -> Interaction {
+        Interaction {
+            point: hit.point,
+            ng: self.ng,
+            ns: self.ns,
+            wo: self.wo,
+            front_face: self.front_face,
+            surface,
+            cone: self.cone,
+            offset_scale: self.offset_scale,
+        }
+    }
 }
 
 impl Interaction {
@@ -115,32 +130,15 @@ impl Interaction {
         cone: RayCone,
         distance: f32,
     ) -> Self {
-        let Frame {
-            wo,
-            front_face,
-            ng,
-            ns,
-            cone,
-            width_uv,
-            offset_scale,
-        } = Frame::new(scene, direction, hit, cone, distance);
-        let with = |surface| Self {
-            point: hit.point,
-            ng,
-            ns,
-            wo,
-            front_face,
-            surface,
-            cone,
-            offset_scale,
-        };
+        let f = Frame::new(scene, direction, hit, cone, distance);
+        let with = |surface| f.interaction(hit, surface);
         // An untextured material's sample is copied once, from the scene
         // straight into the interaction (through a returned value, it was
         // copied twice: 2 of the 3.8% `memmove` of the wavefront's glTF
         // Cornell box).
         match scene.cached_surface(hit.material) {
             Some(s) => with(*s),
-            None => with(scene.surface(hit.material, hit.uv, width_uv)),
+            None => with(scene.surface(hit.material, hit.uv, f.width_uv)),
         }
     }
 
@@ -159,33 +157,16 @@ impl Interaction {
         cone: RayCone,
     ) -> &'s mut Self {
         let distance = hit.t * ray.direction.length();
-        let Frame {
-            wo,
-            front_face,
-            ng,
-            ns,
-            cone,
-            width_uv,
-            offset_scale,
-        } = Frame::new(scene, ray.direction, hit, cone, distance);
+        let f = Frame::new(scene, ray.direction, hit, cone, distance);
         let owned;
         let surface = match scene.cached_surface(hit.material) {
             Some(s) => s,
             None => {
-                owned = scene.surface(hit.material, hit.uv, width_uv);
+                owned = scene.surface(hit.material, hit.uv, f.width_uv);
                 &owned
             }
         };
-        *slot = Some(Self {
-            point: hit.point,
-            ng,
-            ns,
-            wo,
-            front_face,
-            surface: *surface,
-            cone,
-            offset_scale,
-        });
+        *slot = Some(f.interaction(hit, *surface));
         slot.as_mut().expect("just set")
     }
 
