@@ -18,9 +18,11 @@ use glam::{Vec2, Vec3A};
 use crate::core::math::{Color, max_component, orthonormal_basis};
 use crate::core::optics::reflect;
 
-/// Smallest `alpha` used: below it the lobe is narrower than any pixel
-/// and the distribution's peak `1 / (pi alpha^2)` would grow without use.
-/// Roughness 0 (a mirror) is rendered with this alpha.
+/// Smallest `alpha` kept: a lobe that narrow (roughness below about
+/// 0.032) is narrower than any pixel, so a surface whose `alpha` is at
+/// this bound is rendered with a perfectly smooth specular layer
+/// ([`GltfBrdf::is_smooth`]): Fresnel-weighted reflection about the
+/// shading normal, a Dirac lobe that next-event estimation skips.
 pub const MIN_ALPHA: f32 = 1e-3;
 
 /// The microfacet lobes of a glTF metallic-roughness surface at one point.
@@ -134,6 +136,28 @@ impl GltfBrdf {
         self.metallic == 0.0 && self.dielectric_f90 == 0.0 && self.dielectric_f0 == Color::ZERO
     }
 
+    /// True when the specular layers are perfectly smooth (`alpha` at
+    /// [`MIN_ALPHA`], roughness below about 0.032): they reflect about the
+    /// shading normal only, with the weight [`GltfBrdf::smooth_reflectance`],
+    /// and [`GltfBrdf::eval_cos`] holds only the Lambertian base. As a
+    /// microfacet lobe that narrow they sent next-event estimation's
+    /// shadow rays where the lobe is almost zero and drew their directions
+    /// by visible normals, for the same image.
+    #[inline]
+    pub fn is_smooth(&self) -> bool {
+        self.alpha <= MIN_ALPHA
+    }
+
+    /// Reflectance of the smooth specular layers seen from `cos_o` (their
+    /// Fresnel terms, metal and dielectric weighted): the weight of the
+    /// perfect reflection of a smooth surface ([`GltfBrdf::is_smooth`]).
+    #[inline]
+    pub fn smooth_reflectance(&self, cos_o: f32) -> Color {
+        let cos_o = cos_o.max(0.0);
+        self.metal_fresnel(cos_o) * self.metallic
+            + self.dielectric_fresnel(cos_o) * self.dielectric_weight
+    }
+
     /// Dielectric Fresnel at `cos`, weighted by `KHR_materials_specular`.
     #[inline]
     fn dielectric_fresnel(&self, cos: f32) -> Color {
@@ -148,7 +172,9 @@ impl GltfBrdf {
     }
 
     /// The BRDF times `n.wi`, for unit `wo` and `wi` and shading normal
-    /// `n`: zero unless both are above the surface.
+    /// `n`: zero unless both are above the surface. Of a smooth surface
+    /// ([`GltfBrdf::is_smooth`]) only the Lambertian base under the layer:
+    /// its Dirac reflection is not a density.
     pub fn eval_cos(&self, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Color {
         let cos_i = n.dot(wi);
         let cos_o = n.dot(wo);
@@ -161,8 +187,12 @@ impl GltfBrdf {
         let h = (wo + wi).normalize_or_zero();
         let cos_h = n.dot(h);
         let voh = wo.dot(h).max(0.0);
-        let spec = ggx_d(self.alpha, cos_h, h.cross(n).length_squared())
-            * visibility(self.alpha, cos_i, cos_o);
+        let spec = if self.is_smooth() {
+            0.0
+        } else {
+            ggx_d(self.alpha, cos_h, h.cross(n).length_squared())
+                * visibility(self.alpha, cos_i, cos_o)
+        };
         let fd = self.dielectric_fresnel(voh);
         let mut f =
             self.metal_fresnel(voh) * (self.metallic * spec) + fd * (self.dielectric_weight * spec);

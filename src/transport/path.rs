@@ -54,7 +54,12 @@ impl LobeChoice {
             // The glTF BRDF: its Lambertian base and its specular layers
             // (drawn by visible normals), and the smooth glass lobe.
             let (diffuse, specular) = g.lobe_weights(it.ns.dot(it.wo));
-            [diffuse, specular, 0.0, s.transmission.max(0.0)]
+            if g.is_smooth() {
+                // A smooth layer is the mirror lobe.
+                [diffuse, 0.0, specular, s.transmission.max(0.0)]
+            } else {
+                [diffuse, specular, 0.0, s.transmission.max(0.0)]
+            }
         } else {
             [
                 luminance(s.diffuse).max(0.0),
@@ -133,10 +138,14 @@ pub fn bsdf_cos(it: &Interaction, wi: Vec3A) -> Color {
 }
 
 /// True when next-event estimation can reach the surface: it has a
-/// diffuse or glossy lobe.
+/// diffuse or glossy lobe (a smooth glTF layer without a Lambertian base
+/// has neither).
 #[inline]
 pub fn is_lit(it: &Interaction) -> bool {
-    it.is_lit_by_lights() || it.surface.gltf.is_some()
+    match &it.surface.gltf {
+        Some(g) => !g.is_smooth() || g.diffuse != Color::ZERO,
+        None => it.is_lit_by_lights(),
+    }
 }
 
 /// A direction drawn from the surface's lobes.
@@ -206,9 +215,23 @@ pub fn sample_bsdf(
         if lobes.mirror == 0.0 {
             return None;
         }
+        let (direction, reflectance) = match &s.gltf {
+            // A smooth glTF layer: the limit of its microfacet lobe, the
+            // reflection about the shading normal with the Fresnel
+            // reflectance, and none where that falls below the surface.
+            Some(g) => {
+                let cos_o = it.ns.dot(it.wo);
+                let r = reflect(d, it.ns);
+                if !(cos_o > 0.0) || r.dot(it.ng) <= 0.0 {
+                    return None;
+                }
+                (r, g.smooth_reflectance(cos_o))
+            }
+            None => (mirror_dir(), s.mirror),
+        };
         return Some(BsdfSample {
-            ray: Ray::new(it.offset(it.ng), mirror_dir()),
-            weight: s.mirror / lobes.mirror,
+            ray: Ray::new(it.offset(it.ng), direction),
+            weight: reflectance / lobes.mirror,
             pdf: 0.0,
             kind: RayKind::Reflection,
         });
@@ -791,6 +814,108 @@ mod tests {
         assert!(
             (p - 0.2).abs() < 5.0 * (0.2f64 * 0.8 / n as f64).sqrt(),
             "{p}"
+        );
+    }
+    /// A glTF surface of roughness 0 has a smooth (Dirac) specular layer:
+    /// a metal is not lit by next-event estimation and reflects about the
+    /// normal with its Schlick Fresnel reflectance, worked out here in f64;
+    /// a dielectric's layer over its Lambertian base is drawn as the
+    /// mirror lobe, and its sampled weights average to the base's albedo
+    /// (integrated from `bsdf_cos` by a midpoint rule) plus the layer's
+    /// reflectance.
+    #[test]
+    fn smooth_gltf_layers_are_dirac_lobes() {
+        use crate::scene::material::Material;
+        let cos_o = 0.6f32;
+        let wo = Vec3A::new((1.0 - cos_o * cos_o).sqrt(), 0.0, cos_o);
+        let interaction = |m: Material| Interaction {
+            point: Vec3A::ZERO,
+            ng: Vec3A::Z,
+            ns: Vec3A::Z,
+            wo,
+            front_face: true,
+            surface: m.sample(Vec2::ZERO),
+            cone: Default::default(),
+            offset_scale: 0.0,
+        };
+        let base = Color::new(0.9, 0.6, 0.3);
+        let metal = interaction(Material::from_metallic_roughness(
+            base,
+            1.0,
+            0.0,
+            Color::splat(0.04),
+            0.0,
+            1.5,
+        ));
+        assert!(metal.surface.gltf.is_some_and(|g| g.is_smooth()));
+        assert!(!is_lit(&metal));
+        let lobes = LobeChoice::new(&metal);
+        assert_eq!((lobes.diffuse, lobes.glossy, lobes.mirror), (0.0, 0.0, 1.0));
+        let m5 = (1.0 - cos_o as f64).powi(5);
+        for (u_lobe, u) in [(0.0, Vec2::ZERO), (0.7, Vec2::new(0.3, 0.9))] {
+            let s = sample_bsdf(&metal, &lobes, u_lobe, u).expect("a reflection");
+            assert_eq!(s.pdf, 0.0);
+            assert_eq!(s.kind, RayKind::Reflection);
+            assert_eq!(s.ray.direction, reflect(-wo, Vec3A::Z));
+            for (w, b) in s.weight.to_array().into_iter().zip(base.to_array()) {
+                let fresnel = b as f64 + (1.0 - b as f64) * m5;
+                assert!((w as f64 - fresnel).abs() < 1e-6, "{w} vs {fresnel}");
+            }
+        }
+
+        // A shading normal tilted so that the reflection about it falls
+        // below the surface: absorbed, as by the microfacet lobe in the
+        // limit (a Whitted mirror would reflect about the geometric
+        // normal instead).
+        let tilted = Interaction {
+            ns: Vec3A::new(1.0, 0.0, 1.0).normalize(),
+            wo: Vec3A::new(-0.5, 0.0, 1.0).normalize(),
+            ..metal
+        };
+        assert!(tilted.ns.dot(tilted.wo) > 0.0);
+        assert!(reflect(-tilted.wo, tilted.ns).z < 0.0);
+        assert!(sample_bsdf(&tilted, &LobeChoice::new(&tilted), 0.5, Vec2::ZERO).is_none());
+
+        let plastic = interaction(Material::from_metallic_roughness(
+            Color::splat(0.5),
+            0.0,
+            0.0,
+            Color::splat(0.04),
+            0.0,
+            1.5,
+        ));
+        let lobes = LobeChoice::new(&plastic);
+        assert!(is_lit(&plastic) && lobes.diffuse > 0.0 && lobes.mirror > 0.0);
+        assert_eq!(lobes.glossy, 0.0);
+        let (nt, np) = (400, 400);
+        let mut albedo = 0.0f64;
+        for i in 0..nt {
+            let c = (i as f64 + 0.5) / nt as f64;
+            let sin = (1.0 - c * c).sqrt();
+            for j in 0..np {
+                let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / np as f64;
+                let wi = Vec3A::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, c as f32);
+                albedo += bsdf_cos(&plastic, wi).x as f64;
+            }
+        }
+        albedo *= 2.0 * std::f64::consts::PI / (nt * np) as f64;
+        let layer = plastic.surface.gltf.unwrap().smooth_reflectance(cos_o).x as f64;
+        let n = 200_000;
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for k in 0..n {
+            let mut r = Sampler::new(5, k, 0);
+            let (u_lobe, u) = (r.next_f32(), Vec2::new(r.next_f32(), r.next_f32()));
+            if let Some(s) = sample_bsdf(&plastic, &lobes, u_lobe, u) {
+                let x = s.weight.x as f64;
+                sum += x;
+                sum2 += x * x;
+            }
+        }
+        let mean = sum / n as f64;
+        let err = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
+        assert!(
+            (mean - (albedo + layer)).abs() < 5.0 * err + 1e-4,
+            "sampled {mean} +- {err}, integrated base {albedo} + layer {layer}"
         );
     }
 }
