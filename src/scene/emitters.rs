@@ -48,6 +48,17 @@ enum EntryGeometry {
         normal: Vec3A,
         triangle: u32,
     },
+    /// Two triangles of one instance that make the parallelogram `p0 + s
+    /// e1 + t e2` (`s`, `t` in `[0, 1]`; a quad light), sampled as one:
+    /// the sample's two numbers cover it as a unit square, keeping their
+    /// stratification, where choosing a triangle and folding its
+    /// barycentrics scattered it. The same density as the two triangles.
+    Parallelogram {
+        p0: Vec3A,
+        e1: Vec3A,
+        e2: Vec3A,
+        normal: Vec3A,
+    },
     /// A sphere of `radius` in object space; world area density varies
     /// with the transform's stretch at each point.
     Sphere { radius: f32 },
@@ -120,40 +131,31 @@ impl EmitterTable {
             }
             let xf = &inst.transform;
             let first = entries.len();
-            let mut push_triangle = |a: Vec3A, b: Vec3A, c: Vec3A, triangle: u32| {
-                let (p0, p1, p2) = (
-                    xf.to_world.transform_point3a(a),
-                    xf.to_world.transform_point3a(b),
-                    xf.to_world.transform_point3a(c),
-                );
-                let cross = (p1 - p0).cross(p2 - p0);
-                let area = 0.5 * cross.length();
-                if area.is_finite() && area > 0.0 {
-                    entries.push(Entry {
-                        instance: i as u32,
-                        geometry: EntryGeometry::Triangle {
-                            p0,
-                            e1: p1 - p0,
-                            e2: p2 - p0,
-                            normal: cross / (2.0 * area),
-                            triangle,
-                        },
-                    });
-                    power.push(area * weight);
-                }
+            // World-space triangles of a mesh or polygon, with their mesh
+            // triangle (`u32::MAX` for a polygon's fan).
+            let mut triangles: Vec<([Vec3A; 3], u32)> = Vec::new();
+            let mut world = |a: Vec3A, b: Vec3A, c: Vec3A, triangle: u32| {
+                triangles.push((
+                    [
+                        xf.to_world.transform_point3a(a),
+                        xf.to_world.transform_point3a(b),
+                        xf.to_world.transform_point3a(c),
+                    ],
+                    triangle,
+                ));
             };
             match &inst.geometry {
                 InstanceGeometry::Mesh(mesh) => {
                     for t in 0..mesh.triangle_count() {
                         let [a, b, c] = mesh.triangle(t);
-                        push_triangle(a, b, c, t as u32);
+                        world(a, b, c, t as u32);
                     }
                 }
                 InstanceGeometry::Shape(Shape::Polygon { vertices }) => {
                     let v0 = Vec3A::from(vertices[0]);
                     for k in 1..vertices.len() - 1 {
                         let (b, c) = (Vec3A::from(vertices[k]), Vec3A::from(vertices[k + 1]));
-                        push_triangle(v0, b, c, u32::MAX);
+                        world(v0, b, c, u32::MAX);
                     }
                 }
                 InstanceGeometry::Shape(Shape::Sphere { radius })
@@ -189,6 +191,49 @@ impl EmitterTable {
                     }
                 }
                 InstanceGeometry::Shape(_) => {}
+            }
+            // Neighbouring triangles that make a parallelogram are one
+            // entry, unless a texture needs each point's triangle.
+            let textured = m.emission_texture.is_some();
+            let mut k = 0;
+            while k < triangles.len() {
+                let (t, triangle) = triangles[k];
+                let pair = triangles.get(k + 1).filter(|_| !textured);
+                if let Some((p0, e1, e2)) = pair.and_then(|(u, _)| parallelogram(&t, u)) {
+                    let cross = e1.cross(e2);
+                    let area = cross.length();
+                    if area.is_finite() && area > 0.0 {
+                        entries.push(Entry {
+                            instance: i as u32,
+                            geometry: EntryGeometry::Parallelogram {
+                                p0,
+                                e1,
+                                e2,
+                                normal: cross / area,
+                            },
+                        });
+                        power.push(area * weight);
+                        k += 2;
+                        continue;
+                    }
+                }
+                let [p0, p1, p2] = t;
+                let cross = (p1 - p0).cross(p2 - p0);
+                let area = 0.5 * cross.length();
+                if area.is_finite() && area > 0.0 {
+                    entries.push(Entry {
+                        instance: i as u32,
+                        geometry: EntryGeometry::Triangle {
+                            p0,
+                            e1: p1 - p0,
+                            e2: p2 - p0,
+                            normal: cross / (2.0 * area),
+                            triangle,
+                        },
+                    });
+                    power.push(area * weight);
+                }
+                k += 1;
             }
             if entries.len() > first {
                 per_instance.push((i, weight, first));
@@ -314,6 +359,9 @@ impl EmitterTable {
                 };
                 (point, normal, uv)
             }
+            EntryGeometry::Parallelogram { p0, e1, e2, normal } => {
+                (p0 + e1 * v.x + e2 * v.y, normal, Vec2::ZERO)
+            }
             EntryGeometry::Sphere { radius } => {
                 let n_o = crate::core::sampling::uniform_sphere(v);
                 let point = xf.to_world.transform_point3a(n_o * radius);
@@ -359,6 +407,24 @@ impl EmitterTable {
     }
 }
 
+/// The parallelogram `(p0, e1, e2)` that triangles `a` and `b` make
+/// together, if they do: they share two corners exactly (a diagonal), and
+/// their other corners `q_a`, `q_b` are opposite, `q_a + q_b` equal to the
+/// diagonal's sum within `1e-5` of its length (the diagonals bisect each
+/// other). Then `p0 = q_a` and the edges run to the diagonal's ends; the
+/// fourth corner is `q_b` within that tolerance.
+fn parallelogram(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> Option<(Vec3A, Vec3A, Vec3A)> {
+    let shared: Vec<Vec3A> = a.iter().filter(|p| b.contains(p)).copied().collect();
+    let [s0, s1] = shared[..] else {
+        return None;
+    };
+    let qa = *a.iter().find(|p| !shared.contains(p))?;
+    let qb = *b.iter().find(|p| !shared.contains(p))?;
+    let diagonal = (s1 - s0).length();
+    let off = (qa + qb - (s0 + s1)).length();
+    (diagonal > 0.0 && off <= 1e-5 * diagonal).then_some((qa, s0 - qa, s1 - qa))
+}
+
 /// Texture coordinates of a point on a polygon, as its intersection
 /// routine gives them.
 fn shape_uv(shape: &Shape, p: Vec3A) -> Vec2 {
@@ -390,6 +456,53 @@ mod tests {
             emission: Color::splat(e),
             ..Default::default()
         }
+    }
+
+    /// A rectangle light is one entry whose two sample numbers cover it as
+    /// a unit square: the centres of a 4x4 grid of numbers land one in
+    /// each cell of the rectangle's 4x4 grid, at the same density as the
+    /// two triangles. A trapezoid stays two triangles.
+    #[test]
+    fn quads_are_sampled_as_parallelograms() {
+        let polygon = |v: [Vec3; 4]| Shape::Polygon {
+            vertices: Arc::from(v.to_vec()),
+        };
+        let xf = Transform::from_trs_f32(
+            Vec3::new(0.5, 2.0, -1.0),
+            Quat::from_rotation_z(0.4),
+            Vec3::ONE,
+        );
+        let rect = polygon([
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, 1.0),
+        ]);
+        let instances = vec![Instance::new(InstanceGeometry::Shape(rect), &xf, 0)];
+        let materials = vec![glowing(3.0)];
+        let table = EmitterTable::build(&instances, &materials);
+        assert_eq!(table.len(), 1);
+        let mut cells = [0u32; 16];
+        for i in 0..4 {
+            for j in 0..4 {
+                let v = Vec2::new((i as f32 + 0.5) / 4.0, (j as f32 + 0.5) / 4.0);
+                let es = table.sample(&instances, &materials, 0.3, v).unwrap();
+                assert!((es.pdf_area - 0.5).abs() < 1e-6, "{}", es.pdf_area);
+                let p = instances[0].transform.to_object.transform_point3a(es.point);
+                assert!(p.y.abs() < 1e-5, "{p}");
+                let (x, z) = ((p.x * 2.0) as usize, (p.z * 4.0) as usize);
+                cells[x.min(3) * 4 + z.min(3)] += 1;
+            }
+        }
+        assert_eq!(cells, [1; 16]);
+        let trapezoid = polygon([
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(1.5, 0.0, 1.0),
+            Vec3::new(0.5, 0.0, 1.0),
+        ]);
+        let instances = vec![Instance::new(InstanceGeometry::Shape(trapezoid), &xf, 0)];
+        assert_eq!(EmitterTable::build(&instances, &materials).len(), 2);
     }
 
     /// Area of the ellipsoid with semi-axes `a`, by midpoint quadrature
@@ -473,7 +586,8 @@ mod tests {
         ];
         let materials = vec![Material::default(), glowing(2.0), glowing(5.0)];
         let table = EmitterTable::build(&instances, &materials);
-        assert_eq!(table.len(), 2 + 1 + 1);
+        // The square is one parallelogram entry.
+        assert_eq!(table.len(), 1 + 1 + 1);
         let pi = std::f64::consts::PI;
         let area = 2.0 + pi * 0.25 * 6.0 + ellipsoid_area(stretch * 0.8);
         let n = 200_000;
