@@ -414,12 +414,18 @@ impl EmitterTable {
 /// other). Then `p0 = q_a` and the edges run to the diagonal's ends; the
 /// fourth corner is `q_b` within that tolerance.
 fn parallelogram(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> Option<(Vec3A, Vec3A, Vec3A)> {
-    let shared: Vec<Vec3A> = a.iter().filter(|p| b.contains(p)).copied().collect();
-    let [s0, s1] = shared[..] else {
-        return None;
+    // The corner of `a` that `b` lacks, and the two it shares.
+    let lone = (0..3).find(|&k| !b.contains(&a[k]))?;
+    let (s0, s1) = match lone {
+        0 => (a[1], a[2]),
+        1 => (a[0], a[2]),
+        _ => (a[0], a[1]),
     };
-    let qa = *a.iter().find(|p| !shared.contains(p))?;
-    let qb = *b.iter().find(|p| !shared.contains(p))?;
+    if !(b.contains(&s0) && b.contains(&s1)) {
+        return None;
+    }
+    let qa = a[lone];
+    let qb = *b.iter().find(|&&p| p != s0 && p != s1)?;
     let diagonal = (s1 - s0).length();
     let off = (qa + qb - (s0 + s1)).length();
     (diagonal > 0.0 && off <= 1e-5 * diagonal).then_some((qa, s0 - qa, s1 - qa))
