@@ -251,7 +251,7 @@ impl GltfBrdf {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::core::rng::Sampler;
 
@@ -274,7 +274,7 @@ mod tests {
     /// The directional albedo `int f cos dwi` of a lobe by a midpoint rule
     /// over `(cos theta, phi)` (the integrand is smooth for these alphas
     /// at this resolution).
-    fn albedo_quadrature(b: &GltfBrdf, wo: Vec3A, n_theta: usize, n_phi: usize) -> f64 {
+    pub(crate) fn albedo_quadrature(b: &GltfBrdf, wo: Vec3A, n_theta: usize, n_phi: usize) -> f64 {
         let mut sum = 0.0f64;
         for i in 0..n_theta {
             // Fine near the horizon and at the peak alike: uniform in cos.

@@ -821,7 +821,7 @@ mod tests {
     /// normal with its Schlick Fresnel reflectance, worked out here in f64;
     /// a dielectric's layer over its Lambertian base is drawn as the
     /// mirror lobe, and its sampled weights average to the base's albedo
-    /// (integrated from `bsdf_cos` by a midpoint rule) plus the layer's
+    /// (its `eval_cos`, which `bsdf_cos` is, integrated by a midpoint rule) plus the layer's
     /// reflectance.
     #[test]
     fn smooth_gltf_layers_are_dirac_lobes() {
@@ -887,19 +887,11 @@ mod tests {
         let lobes = LobeChoice::new(&plastic);
         assert!(is_lit(&plastic) && lobes.diffuse > 0.0 && lobes.mirror > 0.0);
         assert_eq!(lobes.glossy, 0.0);
-        let (nt, np) = (400, 400);
-        let mut albedo = 0.0f64;
-        for i in 0..nt {
-            let c = (i as f64 + 0.5) / nt as f64;
-            let sin = (1.0 - c * c).sqrt();
-            for j in 0..np {
-                let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / np as f64;
-                let wi = Vec3A::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, c as f32);
-                albedo += bsdf_cos(&plastic, wi).x as f64;
-            }
-        }
-        albedo *= 2.0 * std::f64::consts::PI / (nt * np) as f64;
-        let layer = plastic.surface.gltf.unwrap().smooth_reflectance(cos_o).x as f64;
+        // `bsdf_cos` of a glTF surface is its BRDF's `eval_cos` (here
+        // with the shading normal +Z).
+        let brdf = plastic.surface.gltf.unwrap();
+        let albedo = crate::core::microfacet::tests::albedo_quadrature(&brdf, wo, 400, 400);
+        let layer = brdf.smooth_reflectance(cos_o).x as f64;
         let n = 200_000;
         let (mut sum, mut sum2) = (0.0f64, 0.0f64);
         for k in 0..n {
