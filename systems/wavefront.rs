@@ -416,7 +416,9 @@ pub fn generate_camera_rays(
     let (first, count) = frame.batches[frame.batch];
     stats.0.run_stage(Stage::GenerateCameraRays, |counters| {
         radiance.0.clear();
-        radiance.0.resize(count, Color::ZERO);
+        radiance
+            .0
+            .resize(count * config.settings.path_slots(), Color::ZERO);
         kernels::generate_camera_rays(
             &frame.camera,
             &config.settings,
@@ -662,6 +664,7 @@ pub fn advance_bounce(
 
 /// Stage: adds the batch's paths to their pixels.
 pub fn update_film(
+    config: Res<RenderConfig>,
     frame: Res<WavefrontFrame>,
     radiance: Res<PathRadiance>,
     wavelengths: Res<PathWavelengths>,
@@ -674,6 +677,7 @@ pub fn update_film(
         kernels::update_film(
             &radiance.0,
             &wavelengths.0,
+            config.settings.path_slots(),
             &frame.paths,
             first,
             &mut sums,

@@ -8,7 +8,7 @@ and 16 bounces, both measured against a high-spp reference.
 For each spp, the two renderers are run alternately (`--rounds` times; the
 median time is kept): Prism with `prism render --transport path --max-depth 16`
 (each integrator given by `--integrators`; `recursive+caustics` adds
-`--caustics`), Mitsuba with
+`--caustics`, `recursive+split=2` adds `--split 2`), Mitsuba with
 ../shared/peers/mitsuba_render.py (`llvm_ad_rgb`, `--max-depth 18`, which is
 16 bounces in Mitsuba's counting). Times are each renderer's own render time
 (Prism's "in X s" line, Mitsuba's mi.render plus readback after a compiling
@@ -57,11 +57,14 @@ def mre(img, ref):
 
 
 def run_prism(prism, scene, out, spp, integrator, threads):
-    # "recursive+caustics": the recursive integrator with `--caustics`.
+    # "recursive+caustics": the recursive integrator with `--caustics`;
+    # "recursive+split=2" with `--split 2`.
     integrator, *flags = integrator.split("+")
     cmd = [prism, "render", scene, "-o", out, "--transport", "path", "--max-depth", "16",
            "--width", "320", "--height", "240", "--spp", str(spp), "--integrator", integrator,
-           "--threads", str(threads)] + ["--" + f for f in flags]
+           "--threads", str(threads)]
+    for f in flags:
+        cmd += ["--" + f] if "=" not in f else ["--" + f.split("=")[0], f.split("=", 1)[1]]
     p = subprocess.run(cmd, capture_output=True, text=True, check=True)
     m = re.search(r"at %d spp in ([0-9.]+) s" % spp, p.stdout + p.stderr)
     if not m:

@@ -37,6 +37,10 @@ impl SamplerKind {
 /// Longest Sobol sequence per pixel (`sobol_burley`'s limit).
 const SOBOL_SAMPLES: u32 = 1 << 16;
 
+/// Mixed into the hash sampler's key of a split path's parts
+/// ([`Sampler::split`]).
+const SPLIT_SALT: u64 = 0x5a17_c0de_9e37_79b9;
+
 /// The sampler of one pixel sample. Successive calls to
 /// [`Sampler::next_f32`] advance the dimension; every number is a pure
 /// function of `(kind, seed, pixel, sample, dimension)`.
@@ -122,6 +126,18 @@ impl SamplerSeed {
             pixel_key: mix64(seed.rotate_left(17) ^ mix64(pixel as u64 ^ 0x5bd1_e995_0000_0000)),
             sample,
             sobol: kind == SamplerKind::Sobol && sample < SOBOL_SAMPLES,
+        }
+    }
+
+    /// The seed of [`Sampler::split`]`(j, k)` of this seed's sampler.
+    #[inline]
+    pub fn split(&self, j: u32, k: u32) -> Self {
+        let sample = self.sample.wrapping_mul(k).wrapping_add(j);
+        Self {
+            key: split_key(self.key, j, k),
+            pixel_key: self.pixel_key,
+            sample,
+            sobol: self.sobol && sample < SOBOL_SAMPLES,
         }
     }
 
@@ -394,6 +410,12 @@ fn sobol_set_lanes(sample: &[u32; SET_LANES], seed: &[u32; SET_LANES]) -> [[f32;
     out
 }
 
+/// The hash key of part `j` of `k` of the path whose key is `key`.
+#[inline]
+fn split_key(key: u64, j: u32, k: u32) -> u64 {
+    mix64(key ^ mix64(SPLIT_SALT ^ (((k as u64) << 32) | j as u64)))
+}
+
 /// A 64-bit finaliser (the "splitmix64" mixing function).
 #[inline]
 fn mix64(mut z: u64) -> u64 {
@@ -429,6 +451,28 @@ impl Sampler {
             sample: self.sample,
             dimension: 0,
             sobol: self.sobol,
+            cached_set: u32::MAX,
+            cached: [0.0; 4],
+            kept_set: u32::MAX,
+            kept: [0.0; 4],
+        }
+    }
+
+    /// The sampler of part `j` of `k` into which a path is split
+    /// ([`crate::core::settings::RenderSettings::split`]): the numbers of
+    /// sample `sample * k + j` of the same pixel, so that the `spp * k`
+    /// parts of a pixel stratify together as that many Sobol samples do;
+    /// the hash sampler's keyed by (seed, pixel, sample, `j`, `k`). A pure
+    /// function of those, like every sampler.
+    #[inline]
+    pub fn split(&self, j: u32, k: u32) -> Sampler {
+        let sample = self.sample.wrapping_mul(k).wrapping_add(j);
+        Sampler {
+            key: split_key(self.key, j, k),
+            pixel_key: self.pixel_key,
+            sample,
+            dimension: 0,
+            sobol: self.sobol && sample < SOBOL_SAMPLES,
             cached_set: u32::MAX,
             cached: [0.0; 4],
             kept_set: u32::MAX,
@@ -819,5 +863,44 @@ mod tests {
             Sampler::new(1, 2, 3).next_f32(),
             Sampler::new(1, 2, 4).next_f32()
         );
+    }
+
+    /// Part `j` of `k` of a Sobol path draws exactly the numbers of
+    /// sample `s k + j` of the same pixel (so a pixel's `spp k` parts
+    /// stratify as that many samples), beyond Sobol's last sample the
+    /// hash numbers; the hash sampler's parts differ from each other and
+    /// from the path's own numbers, each a pure function of its keys.
+    #[test]
+    fn split_parts_are_the_later_samples_of_the_pixel() {
+        for (s, k) in [(0u32, 2u32), (5, 2), (7, 3), (100, 64)] {
+            let parent = Sampler::with_kind(SamplerKind::Sobol, 9, 1234, s);
+            for j in 0..k {
+                let mut part = parent.split(j, k);
+                let mut direct = Sampler::with_kind(SamplerKind::Sobol, 9, 1234, s * k + j);
+                for d in [0u32, 4, 8, 0x2000_0000] {
+                    assert_eq!(
+                        part.set_of_four(d),
+                        direct.set_of_four(d),
+                        "{s} {j}/{k} {d}"
+                    );
+                }
+            }
+        }
+        let last = Sampler::with_kind(SamplerKind::Sobol, 9, 1234, SOBOL_SAMPLES / 2);
+        assert!(!last.split(0, 2).sobol && last.split(0, 2).set_of_four(0)[0] < 1.0);
+        let parent = Sampler::with_kind(SamplerKind::Hash, 9, 1234, 5);
+        let draws: Vec<[f32; 4]> = (0..4)
+            .map(|j| parent.split(j, 4).set_of_four(8))
+            .chain([{
+                let mut own = parent;
+                own.set_of_four(8)
+            }])
+            .collect();
+        for a in 0..draws.len() {
+            for b in 0..a {
+                assert_ne!(draws[a], draws[b], "{a} {b}");
+            }
+        }
+        assert_eq!(parent.split(2, 4).set_of_four(8), draws[2]);
     }
 }

@@ -37,6 +37,10 @@ pub struct RenderSettings {
     /// is then weighed up to `rr_weight` (1: the classic rule, survival
     /// probability equal to the throughput). See [`DEFAULT_RR_WEIGHT`].
     pub rr_weight: f32,
+    /// Path tracing: paths continued from the first surface a camera ray
+    /// hits, each weighted `1 / split`, after that hit's one next-event
+    /// estimate (1: no splitting). See [`MAX_SPLIT`].
+    pub split: u32,
     /// The part of the image and of each pixel's samples to render
     /// (`None`: the whole image, all `spp` samples). A windowed render
     /// produces only the window's pixels, each the exact sum of the
@@ -403,6 +407,7 @@ impl Default for RenderSettings {
             light_samples: 1,
             rr_start_depth: Some(DEFAULT_RR_START_DEPTH),
             rr_weight: DEFAULT_RR_WEIGHT,
+            split: 1,
             window: None,
             style: Style::Shaded,
             gooch: GoochParams::default(),
@@ -415,6 +420,23 @@ impl Default for RenderSettings {
         }
     }
 }
+
+impl RenderSettings {
+    /// Path slots per camera sample in the wavefront's batch arrays: the
+    /// camera path, then one per part when a path-traced frame splits
+    /// ([`RenderSettings::split`]); 1 otherwise.
+    pub fn path_slots(&self) -> usize {
+        if self.transport == Transport::Path && self.split > 1 {
+            1 + self.split as usize
+        } else {
+            1
+        }
+    }
+}
+
+/// Most paths [`RenderSettings::split`] continues from a camera ray's
+/// first hit.
+pub const MAX_SPLIT: u32 = 64;
 
 /// Largest image side accepted, to keep memory bounded.
 pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
@@ -477,6 +499,12 @@ impl RenderSettings {
                 "caustic light tracing splats onto the whole image: it takes no render window or shard"
                     .into(),
             );
+        }
+        if self.split == 0 || self.split > MAX_SPLIT {
+            return Err(format!(
+                "split must be between 1 and {MAX_SPLIT}, got {}",
+                self.split
+            ));
         }
         if !(self.rr_weight > 0.0 && self.rr_weight <= 1.0) {
             return Err(format!(

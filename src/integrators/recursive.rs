@@ -316,14 +316,86 @@ fn trace_path_in<const MEDIA: bool>(
     caustics: bool,
     counters: &mut RenderCounters,
 ) -> Color {
+    let start = PathStart {
+        ray: *camera_ray,
+        cone,
+        throughput: Color::ONE,
+        prev_pdf: 0.0,
+        depth: 0,
+        chain: ChainState::default(),
+    };
+    path_from::<MEDIA>(
+        scene,
+        settings,
+        start,
+        settings.split,
+        sampler,
+        lambda,
+        caustics,
+        counters,
+    )
+}
+
+/// Where the path loop starts: a camera ray, or the continuation of one
+/// part of a split path ([`RenderSettings::split`]), with the state the
+/// loop carries from vertex to vertex.
+#[derive(Clone, Copy, Debug)]
+struct PathStart {
+    ray: Ray,
+    cone: RayCone,
+    throughput: Color,
+    /// Density of the direction of `ray` (0: camera ray or specular lobe).
+    prev_pdf: f32,
+    /// Bounces before `ray`.
+    depth: u32,
+    chain: ChainState,
+}
+
+/// One part of a split path: [`path_from`] without splitting, out of line
+/// (the loop calls it from inside itself).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn split_part<const MEDIA: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    start: PathStart,
+    sampler: &mut Sampler,
+    lambda: Option<f32>,
+    caustics: bool,
+    counters: &mut RenderCounters,
+) -> Color {
+    path_from::<MEDIA>(
+        scene, settings, start, 1, sampler, lambda, caustics, counters,
+    )
+}
+
+/// The path loop from `start`. With `split > 1`, the first vertex (a
+/// surface at depth 0) continues `split` paths instead of one, after its
+/// next-event estimate: part `j` draws from [`Sampler::split`]`(j,
+/// split)`, from the lobe choice of that vertex on, and their radiance,
+/// summed in order, counts `1 / split`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn path_from<const MEDIA: bool>(
+    scene: &RenderScene,
+    settings: &RenderSettings,
+    start: PathStart,
+    split: u32,
+    sampler: &mut Sampler,
+    lambda: Option<f32>,
+    caustics: bool,
+    counters: &mut RenderCounters,
+) -> Color {
     let caustics = caustics && !MEDIA;
-    let mut chain = ChainState::default();
+    let PathStart {
+        mut ray,
+        mut cone,
+        mut throughput,
+        mut prev_pdf,
+        mut depth,
+        mut chain,
+    } = start;
     let mut radiance = Color::ZERO;
-    let mut throughput = Color::ONE;
-    let mut ray = *camera_ray;
-    let mut cone = cone;
-    let mut prev_pdf = 0.0;
-    let mut depth = 0;
     // Surfaces' shadow rays cross media only where some can be seen
     // through (`RenderScene::shadows_are_binary`).
     let through_media = MEDIA && !scene.shadows_are_binary();
@@ -404,17 +476,45 @@ fn trace_path_in<const MEDIA: bool>(
                 }
             });
         }
+        if split > 1 && depth == 0 {
+            let mut parts = Color::ZERO;
+            for j in 0..split {
+                let mut part = sampler.split(j, split);
+                let Some(c) =
+                    path::continue_path(settings, &it, &lobes, depth, throughput, &mut part)
+                else {
+                    continue;
+                };
+                let mut chain = chain;
+                if caustics {
+                    chain.leave(&it.surface, depth, c.sample.pdf);
+                }
+                count_ray(c.sample.kind, counters);
+                let start = PathStart {
+                    ray: if MEDIA {
+                        volume::start_walk(crossing, &it, c.sample.ray)
+                    } else {
+                        c.sample.ray
+                    },
+                    cone: c.cone(&it),
+                    throughput: throughput * c.sample.weight * c.scale,
+                    prev_pdf: c.sample.pdf,
+                    depth: depth + 1,
+                    chain,
+                };
+                parts += split_part::<MEDIA>(
+                    scene, settings, start, &mut part, lambda, caustics, counters,
+                );
+            }
+            return radiance + parts * (1.0 / split as f32);
+        }
         let Some(c) = path::continue_path(settings, &it, &lobes, depth, throughput, sampler) else {
             return radiance;
         };
         if caustics {
             chain.leave(&it.surface, depth, c.sample.pdf);
         }
-        match c.sample.kind {
-            RayKind::Reflection => counters.rays.reflection += 1,
-            RayKind::Refraction => counters.rays.refraction += 1,
-            RayKind::Camera => counters.rays.camera += 1,
-        }
+        count_ray(c.sample.kind, counters);
         throughput = throughput * c.sample.weight * c.scale;
         ray = if MEDIA {
             volume::start_walk(crossing, &it, c.sample.ray)
@@ -424,6 +524,16 @@ fn trace_path_in<const MEDIA: bool>(
         cone = c.cone(&it);
         prev_pdf = c.sample.pdf;
         depth += 1;
+    }
+}
+
+/// Counts a continuation ray by its kind.
+#[inline(always)]
+fn count_ray(kind: RayKind, counters: &mut RenderCounters) {
+    match kind {
+        RayKind::Reflection => counters.rays.reflection += 1,
+        RayKind::Refraction => counters.rays.refraction += 1,
+        RayKind::Camera => counters.rays.camera += 1,
     }
 }
 

@@ -72,6 +72,8 @@ pub struct SettingsDesc {
     pub rr_start_depth: Option<Option<u32>>,
     /// Russian roulette's weight.
     pub rr_weight: Option<f32>,
+    /// Paths continued from each camera ray's first hit (path tracing).
+    pub split: Option<u32>,
     /// Structure over mesh triangles asked for by the file (applied when
     /// it was loaded; kept for reporting).
     pub accel: Option<crate::core::settings::Accel>,
@@ -122,6 +124,7 @@ impl SettingsDesc {
                 .or(under.rr_start_depth)
                 .unwrap_or(d.rr_start_depth),
             rr_weight: self.rr_weight.or(under.rr_weight).unwrap_or(d.rr_weight),
+            split: self.split.or(under.split).unwrap_or(d.split),
             window: None,
             style: self.style.or(under.style).unwrap_or(d.style),
             gooch: self.gooch.or(under.gooch).unwrap_or(d.gooch),

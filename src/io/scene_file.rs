@@ -99,6 +99,9 @@ struct FileSettings {
     russian_roulette: Option<FileRoulette>,
     /// Russian roulette's weight, in (0, 1].
     rr_weight: Option<f32>,
+    /// Paths continued from each camera ray's first hit (path tracing),
+    /// 1 to 64.
+    split: Option<u32>,
     /// Light tracing of directly seen caustics (path transport, recursive
     /// integrator).
     caustics: Option<bool>,
@@ -705,6 +708,14 @@ impl Ctx<'_> {
         {
             return Err(self.err(format!("settings.rr_weight must be in (0, 1], got {w}")));
         }
+        if let Some(k) = s.split
+            && !(1..=crate::core::settings::MAX_SPLIT).contains(&k)
+        {
+            return Err(self.err(format!(
+                "settings.split must be between 1 and {}, got {k}",
+                crate::core::settings::MAX_SPLIT
+            )));
+        }
         if let Some(d) = s.max_depth {
             // The recursive integrator recurses once per bounce: between two
             // facing perfect mirrors a depth of 20000 overflowed its stack
@@ -780,6 +791,7 @@ impl Ctx<'_> {
                 FileRoulette::StartDepth(d) => Some(d),
             }),
             rr_weight: s.rr_weight,
+            split: s.split,
             accel: s.accel,
             style: s.style.map(|t| match t {
                 FileStyle::Shaded => crate::core::settings::Style::Shaded,

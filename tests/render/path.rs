@@ -435,3 +435,84 @@ fn path_traced_images_agree_between_integrators_and_thread_counts() {
         "the sampler is used"
     );
 }
+
+/// Split paths (`RenderSettings::split`): each of the `k` parts
+/// continued from a camera ray's first hit counts `1 / k`, so the white
+/// furnace still gives `Le / (1 - a)` with both integrators; the image is
+/// the same bit for bit with both integrators on one and two threads, for
+/// both samplers; and it differs from the unsplit one.
+#[test]
+fn split_paths_keep_the_white_furnace_and_agree_between_integrators() {
+    let (albedo, le) = (0.8f64, 0.25f64);
+    let scene = format!(
+        r#"
+[camera]
+look_from = [0.1, 0.2, 0.3]
+look_at = [1, 0.5, 0]
+vfov = 90
+[[objects]]
+shape = {{ type = "sphere", radius = 2.0 }}
+material = {{ color = {albedo}, emission = {le} }}
+"#
+    );
+    let expected = le / (1.0 - albedo);
+    for (split, kind) in [2, 3]
+        .into_iter()
+        .flat_map(|s| IntegratorKind::ALL.map(|k| (s, k)))
+    {
+        let settings = RenderSettings {
+            split,
+            ..path_settings(16, 8, 120)
+        };
+        let film = render_text(&scene, &settings, kind);
+        let (mean, err) = mean_and_error(&green(&film));
+        assert!(
+            (mean - expected).abs() < 5.0 * err + 1e-6,
+            "{kind:?} split {split}: mean {mean} vs {expected} (standard error {err})"
+        );
+        assert!(err > 0.0 && err < 0.02 * expected, "standard error {err}");
+    }
+    for (scene, sampler) in [
+        ("cornell.toml", SamplerKind::Sobol),
+        ("cornell.toml", SamplerKind::Hash),
+        ("fog.toml", SamplerKind::Sobol),
+    ] {
+        let path = assets().join(scene);
+        let settings = RenderSettings {
+            split: 2,
+            sampler,
+            ..path_settings(24, 4, 6)
+        };
+        let mut films = Vec::new();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for kind in IntegratorKind::ALL {
+                films.push((
+                    threads,
+                    kind,
+                    pool.install(|| render_file(&path, &settings, kind)),
+                ));
+            }
+        }
+        let (_, _, reference) = &films[0];
+        assert!(reference.pixels.iter().any(|p| p.max_element() > 0.0));
+        for (threads, kind, film) in &films {
+            assert!(
+                film.pixels == reference.pixels,
+                "{scene} {sampler:?}: split paths, {kind:?} on {threads} threads"
+            );
+        }
+        let unsplit = RenderSettings {
+            split: 1,
+            ..settings
+        };
+        let plain = render_file(&path, &unsplit, IntegratorKind::Recursive);
+        assert!(
+            plain.pixels != reference.pixels,
+            "{scene} {sampler:?}: the split is used"
+        );
+    }
+}

@@ -88,6 +88,15 @@ pub struct PathFlags {
     /// [default: the scene's, else 0.25].
     #[arg(long, value_name = "WEIGHT")]
     pub rr_weight: Option<f32>,
+    /// Path tracing: paths continued from the first
+    /// surface each camera ray hits, each weighted 1/N, after one
+    /// next-event estimate there (Arnold's diffuse samples, Cycles'
+    /// branched path tracing). Where direct light is smooth and the
+    /// indirect noisy, 2 reaches a given error sooner than twice the
+    /// samples (see the README's "Path transport") [default: the scene's,
+    /// else 1].
+    #[arg(long, value_name = "N")]
+    pub split: Option<u32>,
     /// Random numbers: Owen-scrambled Sobol points, stratified per pixel,
     /// or independent hashed numbers [default: the scene's, else sobol].
     #[arg(long, value_enum)]

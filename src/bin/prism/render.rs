@@ -606,6 +606,7 @@ fn render_with_pool(
         transport: args.transport.get(),
         light_samples: args.path.light_samples,
         rr_weight: args.path.rr_weight,
+        split: args.path.split,
         sampler: args.path.sampler(),
         radiosity: args.radiosity.desc(),
         panorama: args.projection.get(),

@@ -132,7 +132,7 @@ pub fn auto_index(count: u32) -> Result<u32> {
 /// when this text agrees.
 pub fn settings_text(s: &RenderSettings, integrator: &str, camera: usize, bvh: &str) -> String {
     format!(
-        "size={}x{} max_depth={} min_contribution={:?} transport={} light_samples={} russian_roulette={} rr_weight={:?} sampler={} style={:?} gooch={:?} integrator={integrator} camera={camera} bvh={bvh}",
+        "size={}x{} max_depth={} min_contribution={:?} transport={} light_samples={} russian_roulette={} rr_weight={:?} split={} sampler={} style={:?} gooch={:?} integrator={integrator} camera={camera} bvh={bvh}",
         s.width,
         s.height,
         s.max_depth,
@@ -142,6 +142,7 @@ pub fn settings_text(s: &RenderSettings, integrator: &str, camera: usize, bvh: &
         s.rr_start_depth
             .map_or("off".to_string(), |d| format!("from {d}")),
         s.rr_weight,
+        s.split,
         s.sampler.name(),
         s.style,
         s.gooch,

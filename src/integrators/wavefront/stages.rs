@@ -45,6 +45,11 @@ use crate::transport::whitted::{
 /// made in parallel chunks. Path `p` goes where `paths` says (sample
 /// `p % spp` of pixel `p / spp` for a whole image), with the same film
 /// position and sample keys as the recursive tracer.
+///
+/// A path-traced frame that splits ([`RenderSettings::split`] `k > 1`)
+/// gives each path `1 + k` slots ([`RenderSettings::path_slots`]): its
+/// camera ray's at `p (1 + k)`, then its parts' at `p (1 + k) + 1 + j`,
+/// whose sampler seeds are [`SamplerSeed::split`]`(j, k)`.
 #[allow(clippy::too_many_arguments)]
 pub fn generate_camera_rays(
     camera: &CameraRays,
@@ -68,6 +73,7 @@ pub fn generate_camera_rays(
     // Each chunk walks its consecutive paths' keys (`PathMap::paths_from`)
     // instead of dividing each path index out.
     let keys = |start: usize| paths.paths_from(first + start as u64);
+    let slots = settings.path_slots();
     // Path transport draws numbers at every bounce: each path's sampler
     // keys are hashed once here, for the shading stages to start from.
     if settings.transport != Transport::Path {
@@ -76,18 +82,22 @@ pub fn generate_camera_rays(
     } else {
         // Every path of the batch starts with no kept set (a slot holds
         // the previous batch's path of the same index until cleared).
-        kept.resize_with(count, KeptSlot::default);
+        kept.resize_with(count * slots, KeptSlot::default);
         kept.par_iter()
             .with_min_len(CHUNK)
             .for_each(KeptSlot::clear);
-        seeds.resize(count, SamplerSeed::default());
+        seeds.resize(count * slots, SamplerSeed::default());
         seeds
-            .par_chunks_mut(CHUNK)
+            .par_chunks_mut(CHUNK * slots)
             .enumerate()
             .with_max_len(1)
             .for_each(|(c, s)| {
-                for (s, k) in s.iter_mut().zip(keys(c * CHUNK)) {
-                    *s = seed(&k);
+                for (s, k) in s.chunks_mut(slots).zip(keys(c * CHUNK)) {
+                    let camera = seed(&k);
+                    s[0] = camera;
+                    for (j, part) in s[1..].iter_mut().enumerate() {
+                        *part = camera.split(j as u32, settings.split);
+                    }
                 }
             });
     }
@@ -98,9 +108,10 @@ pub fn generate_camera_rays(
     // (`PrimedSets`); none for one sample per pixel (the pixel centre).
     let film_sets = |range: std::ops::Range<usize>| {
         let mut sets = Vec::new();
-        if settings.spp > 1 && seeds.len() >= range.end {
-            let requests: Option<Vec<SetRequest>> =
-                seeds[range].iter().map(|s| s.sobol_request(0)).collect();
+        if settings.spp > 1 && seeds.len() >= range.end * slots {
+            let requests: Option<Vec<SetRequest>> = range
+                .map(|local| seeds[local * slots].sobol_request(0))
+                .collect();
             if let Some(requests) = requests {
                 sets.resize(requests.len(), [0.0; 4]);
                 sobol_sets(&requests, &mut sets);
@@ -112,7 +123,7 @@ pub fn generate_camera_rays(
         let sets = film_sets(range.clone());
         let start = range.start;
         keys(range.start).zip(range).map(move |(k, local)| {
-            let mut sampler = match seeds.get(local) {
+            let mut sampler = match seeds.get(local * slots) {
                 Some(s) => s.sampler(),
                 None => seed(&k).sampler(),
             };
@@ -122,7 +133,7 @@ pub fn generate_camera_rays(
             RayItem {
                 ray: camera_ray_paired(camera, k.x, k.y, settings.spp, &mut sampler),
                 throughput: Color::ONE,
-                path: local as u32,
+                path: (local * slots) as u32,
                 depth: 0,
                 pdf: 0.0,
                 cone: camera.cone(),
@@ -147,13 +158,16 @@ pub fn path_wavelengths(
         out.clear();
         return;
     }
+    // A split path's parts take its camera path's wavelength.
+    let slots = settings.path_slots();
     out.resize(seeds.len(), 0.0);
-    out.par_chunks_mut(CHUNK)
-        .zip(seeds.par_chunks(CHUNK))
+    out.par_chunks_mut(CHUNK * slots)
+        .zip(seeds.par_chunks(CHUNK * slots))
         .with_max_len(1)
         .for_each(|(out, seeds)| {
-            for (w, seed) in out.iter_mut().zip(seeds) {
-                *w = path::path_wavelength(scene, settings, &mut seed.sampler()).unwrap_or(0.0);
+            for (w, seed) in out.chunks_mut(slots).zip(seeds.chunks(slots)) {
+                let lambda = path::path_wavelength(scene, settings, &mut seed[0].sampler());
+                w.fill(lambda.unwrap_or(0.0));
             }
         });
 }
@@ -1136,7 +1150,34 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
                     out.push_shadow(h, q)
                 });
             }
-            if SCATTER
+            if SCATTER && settings.split > 1 && h.depth == 0 {
+                // A split path: its parts' slots follow its own.
+                for j in 0..settings.split {
+                    let part_slot = h.path + 1 + j;
+                    let mut part = seeds[part_slot as usize].sampler();
+                    let Some(cont) =
+                        path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut part)
+                    else {
+                        continue;
+                    };
+                    let item = RayItem {
+                        ray: if SSS {
+                            volume::start_walk(crossing, it, cont.sample.ray)
+                        } else {
+                            cont.sample.ray
+                        },
+                        throughput: h.throughput * cont.sample.weight * cont.scale,
+                        path: part_slot,
+                        depth: h.depth + 1,
+                        pdf: cont.sample.pdf,
+                        cone: cont.cone(it),
+                    };
+                    out.push_secondary(cont.sample.kind, item);
+                    if let Some(k) = kept.get(part_slot as usize) {
+                        k.store(part.kept());
+                    }
+                }
+            } else if SCATTER
                 && let Some(cont) =
                     path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
             {
@@ -1231,7 +1272,10 @@ pub fn trace_shadow_rays(shadows: &ShadowSegments, radiance: &mut [Color]) {
 
 /// Stage: adds each finished path of the batch to its window pixel,
 /// dropping and counting non-finite samples. The sums are exact, so the
-/// order in which paths are added does not matter.
+/// order in which paths are added does not matter. `slots` path slots
+/// make one sample ([`RenderSettings::path_slots`]): a split path's
+/// radiance is its camera path's plus its parts' sum (in order) over
+/// their number, as the recursive integrator adds them.
 ///
 /// In spectral mode (path transport of a scene with a dispersive
 /// material) each path's radiance is first weighted by its wavelength's
@@ -1240,6 +1284,7 @@ pub fn trace_shadow_rays(shadows: &ShadowSegments, radiance: &mut [Color]) {
 pub fn update_film(
     radiance: &[Color],
     wavelengths: &[f32],
+    slots: usize,
     paths: &PathMap,
     first: u64,
     sums: &mut PixelAccumulator,
@@ -1253,8 +1298,16 @@ pub fn update_film(
     let n = paths.samples() as u64;
     let mut pixel = (first / n) as usize;
     let mut left = n - first % n;
-    for (local, &l) in radiance.iter().enumerate() {
-        let l = match wavelengths.get(local) {
+    for (local, slot) in radiance.chunks(slots).enumerate() {
+        let mut l = slot[0];
+        if slots > 1 {
+            let mut parts = Color::ZERO;
+            for &part in &slot[1..] {
+                parts += part;
+            }
+            l += parts * (1.0 / (slots - 1) as f32);
+        }
+        let l = match wavelengths.get(local * slots) {
             Some(&w) => path::weigh_wavelength(l, Some(w)),
             None => l,
         };

@@ -491,6 +491,7 @@ fn run_in_pool(args: &TradeoffArgs, wall: Instant) -> Result<()> {
         light_samples: args.path.light_samples,
         rr_start_depth: args.path.rr_depth.map(Some),
         rr_weight: args.path.rr_weight,
+        split: args.path.split,
         sampler: args.path.sampler(),
         photon: args.photon.overrides(),
         radiosity: args.radiosity.desc(),
