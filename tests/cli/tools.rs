@@ -196,7 +196,7 @@ fn compare_prints_the_metrics_and_rejects_bad_input() {
 }
 
 const HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight,split";
 
 fn tradeoff(out: &Path, extra: &[&str]) -> Output {
     prism()
@@ -277,12 +277,13 @@ fn tradeoff_writes_the_csv_and_plots() {
         "transport",
         "sampler",
         "accel",
+        "split",
     ] {
         assert!(knobs.contains(&k), "no {k} rows");
     }
     for l in &lines[1..] {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 17, "{l}");
+        assert_eq!(f.len(), 18, "{l}");
         let spp: u64 = f[3].parse().unwrap();
         let seconds: f64 = f[10].parse().unwrap();
         let rays: u64 = f[11].parse().unwrap();
@@ -296,6 +297,8 @@ fn tradeoff_writes_the_csv_and_plots() {
         assert!(["bvh", "kdtree", "grid"].contains(&f[15]), "{l}");
         let w: f32 = f[16].parse().unwrap();
         assert!(w > 0.0 && w <= 1.0, "{l}");
+        let split: u32 = f[17].parse().unwrap();
+        assert!([1, 2, 4].contains(&split), "{l}");
     }
     let spp1 = lines.iter().find(|l| l.starts_with("spp,1,")).unwrap();
     assert!(spp1.starts_with("spp,1,path,1,8,"), "{spp1}");

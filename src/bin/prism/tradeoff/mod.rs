@@ -146,11 +146,14 @@ pub enum Knob {
     /// Photon mapping's iterations (photon transport): 1, 2, 4, 8, 16, 32,
     /// 64; the error should fall as they grow.
     PhotonIterations,
+    /// Paths continued from each camera ray's first hit (path transport):
+    /// 1, 2, 4.
+    Split,
 }
 
 impl Knob {
     /// Every knob, in sweep order.
-    pub const ALL: [Knob; 11] = [
+    pub const ALL: [Knob; 12] = [
         Knob::Spp,
         Knob::MaxDepth,
         Knob::MinContribution,
@@ -162,6 +165,7 @@ impl Knob {
         Knob::Sampler,
         Knob::Accel,
         Knob::PhotonIterations,
+        Knob::Split,
     ];
 
     /// Name as written in the CSV and on the command line.
@@ -178,6 +182,7 @@ impl Knob {
             Knob::Sampler => "sampler",
             Knob::Accel => "accel",
             Knob::PhotonIterations => "photon-iterations",
+            Knob::Split => "split",
         }
     }
 }
@@ -215,6 +220,7 @@ const TRANSPORT_VALUES: [Transport; 4] = [
 ];
 const PHOTON_ITERATION_VALUES: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
 const SAMPLER_VALUES: [SamplerKind; 2] = [SamplerKind::Sobol, SamplerKind::Hash];
+const SPLIT_VALUES: [u32; 3] = [1, 2, 4];
 
 /// The name of a BVH preset, as on `prism render --bvh-quality`.
 pub fn bvh_name(q: BuildQuality) -> &'static str {
@@ -284,6 +290,7 @@ impl Knob {
                 .iter()
                 .map(|v| v.name().to_string())
                 .collect(),
+            Knob::Split => SPLIT_VALUES.iter().map(|v| v.to_string()).collect(),
         }
     }
 
@@ -301,6 +308,7 @@ impl Knob {
             Knob::Accel => c.accel = ACCEL_VALUES[i],
             Knob::Transport => s.transport = TRANSPORT_VALUES[i],
             Knob::Sampler => s.sampler = SAMPLER_VALUES[i],
+            Knob::Split => s.split = SPLIT_VALUES[i],
             Knob::PhotonIterations => {
                 s.transport = Transport::Photon;
                 s.photon.iterations = PHOTON_ITERATION_VALUES[i];
@@ -322,6 +330,7 @@ impl Knob {
             Knob::Accel => c.accel.name().to_string(),
             Knob::Transport => s.transport.name().to_string(),
             Knob::Sampler => s.sampler.name().to_string(),
+            Knob::Split => s.split.to_string(),
             Knob::PhotonIterations => match s.transport {
                 Transport::Photon => s.photon.iterations.to_string(),
                 _ => "-".to_string(),
@@ -374,7 +383,7 @@ pub struct Row {
 
 /// The CSV header.
 pub const CSV_HEADER: &str = "knob,value,transport,spp,max_depth,min_contribution,light_samples,\
-russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight";
+russian_roulette,bvh,integrator,seconds,rays,rmse,rel_mse,flip,accel,rr_weight,split";
 
 fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
     let mut s = String::from(CSV_HEADER);
@@ -383,7 +392,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
         let c = &r.planned.config.settings;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.planned.knob,
             r.planned.value,
             c.transport.name(),
@@ -401,6 +410,7 @@ fn csv(rows: &[Row], integrator: IntegratorKind) -> String {
             r.metrics.flip,
             r.planned.config.accel.name(),
             c.rr_weight,
+            c.split,
         );
     }
     s
@@ -741,6 +751,7 @@ mod tests {
         assert_eq!(count("transport"), TRANSPORT_VALUES.len() - 1);
         assert_eq!(count("photon-iterations"), PHOTON_ITERATION_VALUES.len());
         assert_eq!(count("sampler"), 1);
+        assert_eq!(count("split"), SPLIT_VALUES.len() - 1);
         for x in &p[1..] {
             let mut c = x.config.clone();
             // Undo the one knob: the rest must be the base.
@@ -755,6 +766,7 @@ mod tests {
                 "accel" => c.accel = base.accel,
                 "transport" => c.settings.transport = base.settings.transport,
                 "sampler" => c.settings.sampler = base.settings.sampler,
+                "split" => c.settings.split = base.settings.split,
                 "photon-iterations" => {
                     c.settings.transport = base.settings.transport;
                     c.settings.photon.iterations = base.settings.photon.iterations;

@@ -95,6 +95,7 @@ fn point_label(r: &Row) -> String {
         "light-samples" => format!("{} ls", r.planned.value),
         "russian-roulette" => format!("rr {}", r.planned.value),
         "rr-weight" => format!("rr weight {}", r.planned.value),
+        "split" => format!("split {}", r.planned.value),
         "bvh" => format!("bvh {}", r.planned.value),
         _ => r.planned.value.clone(),
     }
