@@ -255,9 +255,12 @@ fn tradeoff_writes_the_csv_and_plots() {
     // The base, then every knob's values but the base's: spp 6 of 7, depth
     // 6 of 7, threshold 5 of 6, light samples 3 of 4, roulette 3 of 4,
     // roulette weight 3 of 4, BVH 5 of 6, transport 3 of 4 (whitted, photon, radiosity), sampler
-    // 1 of 2, accel 2 of 3 (the photon-iterations knob is not swept by
-    // default).
-    assert_eq!(lines.len(), 1 + 1 + 6 + 6 + 5 + 3 + 3 + 3 + 5 + 3 + 1 + 2);
+    // 1 of 2, accel 2 of 3, split 2 of 3 (the photon-iterations knob is
+    // not swept by default).
+    assert_eq!(
+        lines.len(),
+        1 + 1 + 6 + 6 + 5 + 3 + 3 + 3 + 5 + 3 + 1 + 2 + 2
+    );
     for t in ["transport,photon,", "transport,radiosity,"] {
         assert!(lines.iter().any(|l| l.starts_with(t)), "no {t} row");
     }
