@@ -89,15 +89,19 @@ pub fn generate_camera_rays(
         seeds.resize(count * slots, SamplerSeed::default());
         seeds
             .par_chunks_mut(CHUNK * slots)
+            .zip(kept.par_chunks(CHUNK * slots))
             .enumerate()
             .with_max_len(1)
-            .for_each(|(c, s)| {
+            .for_each(|(c, (s, kept))| {
                 for (s, k) in s.chunks_mut(slots).zip(keys(c * CHUNK)) {
                     let camera = seed(&k);
                     s[0] = camera;
                     for (j, part) in s[1..].iter_mut().enumerate() {
                         *part = camera.split(j as u32, settings.split);
                     }
+                }
+                if slots > 1 {
+                    prime_part_directions(s, kept, slots);
                 }
             });
     }
@@ -141,6 +145,29 @@ pub fn generate_camera_rays(
         })
     });
     rays.camera += count as u64;
+}
+
+/// The first numbers a split path's parts draw, drawn side by side
+/// ([`sobol_sets`]) into their kept slots: each part's BSDF direction set
+/// of bounce 0 ([`path::direction_set`]), which the shading stage then
+/// finds there instead of drawing it part by part. `seeds` and `kept`:
+/// whole paths of `slots` slots each.
+fn prime_part_directions(seeds: &[SamplerSeed], kept: &[KeptSlot], slots: usize) {
+    let set = path::direction_set(0);
+    let parts: Vec<usize> = (0..seeds.len()).filter(|i| i % slots != 0).collect();
+    for chunk in parts.chunks(SET_LANES) {
+        let requests: Option<Vec<SetRequest>> =
+            chunk.iter().map(|&i| seeds[i].sobol_request(set)).collect();
+        // The hash sampler has no sets to draw.
+        let Some(requests) = requests else {
+            return;
+        };
+        let mut numbers = [[0.0f32; 4]; SET_LANES];
+        sobol_sets(&requests, &mut numbers[..requests.len()]);
+        for (&i, &v) in chunk.iter().zip(&numbers) {
+            kept[i].store((set, v));
+        }
+    }
 }
 
 /// Part of the camera-ray stage in spectral mode (path transport of a
@@ -1100,7 +1127,8 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
             } else {
                 NO_SET
             },
-            if SCATTER && depth < settings.max_depth {
+            // (A split path's parts draw their own first directions.)
+            if SCATTER && depth < settings.max_depth && !(settings.split > 1 && depth == 0) {
                 path::direction_set(depth)
             } else {
                 NO_SET
@@ -1155,6 +1183,9 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
                 for j in 0..settings.split {
                     let part_slot = h.path + 1 + j;
                     let mut part = seeds[part_slot as usize].sampler();
+                    if let Some(k) = kept.get(part_slot as usize) {
+                        part.restore_kept(k.load());
+                    }
                     let Some(cont) =
                         path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut part)
                     else {
