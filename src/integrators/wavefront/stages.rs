@@ -158,9 +158,10 @@ fn prime_part_directions(seeds: &[SamplerSeed], kept: &[KeptSlot], slots: usize)
     for chunk in parts.chunks(SET_LANES) {
         let requests: Option<Vec<SetRequest>> =
             chunk.iter().map(|&i| seeds[i].sobol_request(set)).collect();
-        // The hash sampler has no sets to draw.
+        // The hash sampler has no sets to draw (nor has a part past the
+        // Sobol sequence's end: its chunk draws its own).
         let Some(requests) = requests else {
-            return;
+            continue;
         };
         let mut numbers = [[0.0f32; 4]; SET_LANES];
         sobol_sets(&requests, &mut numbers[..requests.len()]);
