@@ -55,13 +55,11 @@ fn green(film: &Film) -> Vec<f64> {
     film.pixels.iter().map(|p| p.y as f64).collect()
 }
 
-/// Inside a closed sphere of albedo `a` emitting `Le` everywhere, radiance
-/// is `Le (1 + a + a^2 + ...) = Le / (1 - a)` in every direction.
-#[test]
-fn white_furnace_gives_le_over_one_minus_albedo_with_both_integrators() {
-    for (albedo, le) in [(0.5f64, 1.0f64), (0.8, 0.25)] {
-        let scene = format!(
-            r#"
+/// A closed sphere of albedo `albedo` emitting `le` everywhere, seen from
+/// inside.
+fn furnace(albedo: f64, le: f64) -> String {
+    format!(
+        r#"
 [camera]
 look_from = [0.1, 0.2, 0.3]
 look_at = [1, 0.5, 0]
@@ -70,7 +68,15 @@ vfov = 90
 shape = {{ type = "sphere", radius = 2.0 }}
 material = {{ color = {albedo}, emission = {le} }}
 "#
-        );
+    )
+}
+
+/// Inside a closed sphere of albedo `a` emitting `Le` everywhere, radiance
+/// is `Le (1 + a + a^2 + ...) = Le / (1 - a)` in every direction.
+#[test]
+fn white_furnace_gives_le_over_one_minus_albedo_with_both_integrators() {
+    for (albedo, le) in [(0.5f64, 1.0f64), (0.8, 0.25)] {
+        let scene = furnace(albedo, le);
         let expected = le / (1.0 - albedo);
         // Russian roulette from bounce 5 (the default), by the classic rule
         // (weight 1) and by the default weight: unbiased either way.
@@ -444,17 +450,7 @@ fn path_traced_images_agree_between_integrators_and_thread_counts() {
 #[test]
 fn split_paths_keep_the_white_furnace_and_agree_between_integrators() {
     let (albedo, le) = (0.8f64, 0.25f64);
-    let scene = format!(
-        r#"
-[camera]
-look_from = [0.1, 0.2, 0.3]
-look_at = [1, 0.5, 0]
-vfov = 90
-[[objects]]
-shape = {{ type = "sphere", radius = 2.0 }}
-material = {{ color = {albedo}, emission = {le} }}
-"#
-    );
+    let scene = furnace(albedo, le);
     let expected = le / (1.0 - albedo);
     for (split, kind) in [2, 3]
         .into_iter()

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::accel::packet::{LANES, LaneMask};
 use crate::core::math::{Color, Ray, RayCone, max_component, one_octant};
-use crate::core::rng::{KeptSlot, SET_LANES, SamplerSeed, SetRequest, sobol_sets};
+use crate::core::rng::{KeptSlot, SET_LANES, Sampler, SamplerSeed, SetRequest, sobol_sets};
 use crate::core::settings::{RenderSettings, Style, Transport};
 use crate::core::window::PathMap;
 use crate::image::film::PixelAccumulator;
@@ -1179,40 +1179,17 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
                     out.push_shadow(h, q)
                 });
             }
-            if SCATTER && settings.split > 1 && h.depth == 0 {
-                // A split path: its parts' slots follow its own.
-                for j in 0..settings.split {
-                    let part_slot = h.path + 1 + j;
-                    let mut part = seeds[part_slot as usize].sampler();
-                    if let Some(k) = kept.get(part_slot as usize) {
-                        part.restore_kept(k.load());
-                    }
-                    let Some(cont) =
-                        path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut part)
-                    else {
-                        continue;
-                    };
-                    let item = RayItem {
-                        ray: if SSS {
-                            volume::start_walk(crossing, it, cont.sample.ray)
-                        } else {
-                            cont.sample.ray
-                        },
-                        throughput: h.throughput * cont.sample.weight * cont.scale,
-                        path: part_slot,
-                        depth: h.depth + 1,
-                        pdf: cont.sample.pdf,
-                        cone: cont.cone(it),
-                    };
-                    out.push_secondary(cont.sample.kind, item);
-                    if let Some(k) = kept.get(part_slot as usize) {
-                        k.store(part.kept());
-                    }
-                }
-            } else if SCATTER
-                && let Some(cont) =
-                    path::continue_path(settings, it, &lobes, h.depth, h.throughput, &mut sampler)
-            {
+            if !SCATTER {
+                return;
+            }
+            // The path's next ray, drawn with `sampler`, into path slot
+            // `path` (whose kept Sobol set is `kept_slot`).
+            let mut go_on = |path: u32, sampler: &mut Sampler, kept_slot: Option<&KeptSlot>| {
+                let Some(cont) =
+                    path::continue_path(settings, it, &lobes, h.depth, h.throughput, sampler)
+                else {
+                    return;
+                };
                 let item = RayItem {
                     ray: if SSS {
                         volume::start_walk(crossing, it, cont.sample.ray)
@@ -1220,15 +1197,29 @@ pub fn shade_path<const NEE: bool, const SCATTER: bool, const SSS: bool>(
                         cont.sample.ray
                     },
                     throughput: h.throughput * cont.sample.weight * cont.scale,
-                    path: h.path,
+                    path,
                     depth: h.depth + 1,
                     pdf: cont.sample.pdf,
                     cone: cont.cone(it),
                 };
                 out.push_secondary(cont.sample.kind, item);
-                if let Some(k) = slot {
+                if let Some(k) = kept_slot {
                     k.store(sampler.kept());
                 }
+            };
+            if settings.split > 1 && h.depth == 0 {
+                // A split path: its parts' slots follow its own.
+                for j in 0..settings.split {
+                    let part_slot = h.path + 1 + j;
+                    let mut part = seeds[part_slot as usize].sampler();
+                    let part_kept = kept.get(part_slot as usize);
+                    if let Some(k) = part_kept {
+                        part.restore_kept(k.load());
+                    }
+                    go_on(part_slot, &mut part, part_kept);
+                }
+            } else {
+                go_on(h.path, &mut sampler, slot);
             }
         },
     );
