@@ -24,21 +24,40 @@ pub fn concentric_disk(u: Vec2) -> Vec2 {
     if o.x == 0.0 && o.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, PI / 4.0 * (o.y / o.x))
+    // The angle within its octant, `phi` in [-pi/4, pi/4]: the point is
+    // `r (cos phi, sin phi)` (x's octants) or `r (sin phi, cos phi)` (y's).
+    if o.x.abs() > o.y.abs() {
+        let (s, c) = sin_cos_octant(PI / 4.0 * (o.y / o.x));
+        Vec2::new(o.x * c, o.x * s)
     } else {
-        (o.y, PI / 2.0 - PI / 4.0 * (o.x / o.y))
-    };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+        let (s, c) = sin_cos_octant(PI / 4.0 * (o.x / o.y));
+        Vec2::new(o.y * s, o.y * c)
+    }
 }
 
-/// Cosine-weighted direction around the unit normal `n`.
+/// `(sin x, cos x)` for `x` in `[-pi/4, pi/4]`, by their Taylor
+/// polynomials to degree 7 and 8 (truncation below `3.2e-7` and `2.5e-8`
+/// there): a few multiplications the core overlaps with other work,
+/// where the library's `sinf`/`cosf` were a call on the sampling chain's
+/// critical path.
+#[inline(always)]
+fn sin_cos_octant(x: f32) -> (f32, f32) {
+    let x2 = x * x;
+    let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0))));
+    let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0))));
+    (s, c)
+}
+
+/// Cosine-weighted direction around the unit normal `n`. Unit to within
+/// a few ulps (`n`, its tangents and the disk point are): not normalised
+/// again, which put a square root and a division on the path tracer's
+/// critical path.
 #[inline]
 pub fn cosine_hemisphere(n: Vec3A, u: Vec2) -> Vec3A {
     let d = concentric_disk(u);
     let z = (1.0 - d.length_squared()).max(0.0).sqrt();
     let (t, b) = orthonormal_basis(n);
-    (t * d.x + b * d.y + n * z).normalize()
+    t * d.x + b * d.y + n * z
 }
 
 /// The power heuristic (exponent 2) for `a` samples of density `pa`
@@ -51,6 +70,26 @@ pub fn power_heuristic(a: f32, pa: f32, b: f32, pb: f32) -> f32 {
         x2 / (x2 + y2)
     } else if x > y {
         1.0
+    } else {
+        0.0
+    }
+}
+
+/// The power heuristic's weight of `a` samples of density `pa` against
+/// one of density `pb`, divided by `a pa`: the factor by which one of the
+/// `a` samples' contributions is multiplied, `x / (x^2 + y^2)` with `x =
+/// a pa`, `y = pb`. One division where the weight and then the division by
+/// the density took two, one after the other, on next-event estimation's
+/// critical path. Where `x^2 + y^2` is zero or overflows: `1 / x` when `x`
+/// wins (the weight is then 1), else 0.
+#[inline]
+pub fn power_heuristic_over_density(a: f32, pa: f32, pb: f32) -> f32 {
+    let x = a * pa;
+    let d = x * x + pb * pb;
+    if d > 0.0 && d.is_finite() {
+        x / d
+    } else if x > pb {
+        1.0 / x
     } else {
         0.0
     }
@@ -80,7 +119,8 @@ mod tests {
         for i in 0..count {
             let mut s = Sampler::new(3, i, 0);
             let d = cosine_hemisphere(n, Vec2::new(s.next_f32(), s.next_f32()));
-            assert!((d.length() - 1.0).abs() < 1e-5);
+            // Not normalised again: unit within a few ulps.
+            assert!((d.length() - 1.0).abs() < 1e-6, "{}", d.length());
             assert!(d.dot(n) >= -1e-6);
             sum += d.dot(n) as f64;
         }
@@ -89,6 +129,49 @@ mod tests {
             (mean - 2.0 / 3.0).abs() < 1.18 / (count as f64).sqrt(),
             "{mean}"
         );
+    }
+
+    /// The weight over the density equals the power heuristic's weight
+    /// divided by `a pa`, within a few roundings of either; at the limits
+    /// (a zero or overflowing sum of squares) it is `1 / x` or 0 as the
+    /// weight is 1 or 0.
+    #[test]
+    fn power_heuristic_over_density_is_the_weight_over_the_density() {
+        for (a, pa, pb) in [
+            (1.0, 1.0, 1.0),
+            (1.0, 0.3, 2.0),
+            (2.0, 5.0, 0.01),
+            (1.0, 1e-3, 40.0),
+            (4.0, 7.5e3, 2.0),
+        ] {
+            let want = power_heuristic(a, pa, 1.0, pb) / (a * pa);
+            let got = power_heuristic_over_density(a, pa, pb);
+            assert!(
+                (got - want).abs() <= 4.0 * f32::EPSILON * want,
+                "{a} {pa} {pb}: {got} against {want}"
+            );
+        }
+        assert_eq!(power_heuristic_over_density(1.0, 0.0, 0.0), 0.0);
+        assert_eq!(power_heuristic_over_density(1.0, 1e30, 1.0), 1e-30);
+        assert_eq!(power_heuristic_over_density(1.0, 1.0, 1e30), 0.0);
+    }
+
+    /// The octant's sine and cosine within their Taylor polynomials'
+    /// truncation (below 3.2e-7 and 2.5e-8 on `[-pi/4, pi/4]`) plus a few
+    /// roundings of f32 (about 6e-8 each near 1): 4e-7 on a fine grid.
+    #[test]
+    fn octant_sine_and_cosine_are_within_their_bound() {
+        let steps = 20_000;
+        let mut worst = 0.0f64;
+        for i in 0..=steps {
+            let x = (-1.0 + 2.0 * i as f64 / steps as f64) * std::f64::consts::FRAC_PI_4;
+            let (s, c) = sin_cos_octant(x as f32);
+            let x = x as f32 as f64;
+            worst = worst
+                .max((s as f64 - x.sin()).abs())
+                .max((c as f64 - x.cos()).abs());
+        }
+        assert!(worst < 4e-7, "{worst}");
     }
 
     #[test]

@@ -23,7 +23,7 @@ use glam::{Vec2, Vec3A};
 use crate::core::math::{Color, Ray, luminance, max_component, orthonormal_basis};
 use crate::core::optics::{OFFSET_ULPS, fresnel_dielectric, reflect, refract};
 use crate::core::rng::Sampler;
-use crate::core::sampling::{cosine_hemisphere, power_heuristic};
+use crate::core::sampling::{cosine_hemisphere, power_heuristic, power_heuristic_over_density};
 use crate::core::settings::{RenderSettings, Transport};
 use crate::core::spectrum::{sample_wavelength, wavelength_weight};
 use crate::scene::RenderScene;
@@ -484,12 +484,13 @@ fn area_light_sample(
         return None;
     }
     let pdf_light = ls.pdf_area * dist2 / cos_l * select;
-    let w = if depth < settings.max_depth {
-        power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+    // The MIS weight over the density of the `n` samples.
+    let w_over_pdf = if depth < settings.max_depth {
+        power_heuristic_over_density(n as f32, pdf_light, bsdf_pdf(it, lobes, wi))
     } else {
-        1.0
+        1.0 / (n as f32 * pdf_light)
     };
-    let radiance = f * ls.radiance * (w * (1.0 / n as f32) / pdf_light);
+    let radiance = f * ls.radiance * w_over_pdf;
     if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
         return None;
     }
@@ -543,12 +544,12 @@ fn environment_sample(
         return None;
     }
     let pdf_light = es.pdf * p_env;
-    let w = if depth < settings.max_depth {
-        power_heuristic(n as f32, pdf_light, 1.0, bsdf_pdf(it, lobes, wi))
+    let w_over_pdf = if depth < settings.max_depth {
+        power_heuristic_over_density(n as f32, pdf_light, bsdf_pdf(it, lobes, wi))
     } else {
-        1.0
+        1.0 / (n as f32 * pdf_light)
     };
-    let radiance = f * es.radiance * (w / (n as f32 * pdf_light));
+    let radiance = f * es.radiance * w_over_pdf;
     if !(max_component(radiance) > 0.0) || !radiance.is_finite() {
         return None;
     }
