@@ -9,12 +9,13 @@
 //! probability proportional to its weight, so a path never branches.
 //!
 //! # Random numbers
-//! Every decision reads a fixed dimension of the path's [`Sampler`]:
-//! dimensions 0 and 1 jitter the film position; bounce `b` (the hit of a
-//! ray that has bounced `b` times) owns `stride` dimensions from
-//! `2 + b * stride`, where `stride = 4 + 3 * light_samples`: three per light
-//! sample, then lobe choice, two for the direction, and roulette. Both
-//! integrators therefore draw the same numbers for the same path.
+//! Every decision reads a fixed dimension of the path's [`Sampler`], in
+//! sets of four: set 0 (dimensions 0-3) jitters the film position (and
+//! the lens); bounce `b` (the hit of a ray that has bounced `b` times)
+//! owns one set per light sample and one for its lobe choice and roulette
+//! ([`bounce_dimension`]); the BSDF directions of bounces `2j` and `2j + 1`
+//! share one set far above those ([`direction_set`]). Both integrators
+//! therefore draw the same numbers for the same path.
 
 use std::f32::consts::PI;
 
