@@ -6,6 +6,7 @@ use std::path::Path;
 
 use bevy_ecs::prelude::*;
 use prism::core::settings::RenderSettings;
+use prism::image::film::Film;
 use prism::integrators::IntegratorKind;
 use prism::io::desc::SceneDesc;
 use prism::systems::{Frame, PrismPlugin, RenderConfig, Renderer};
@@ -48,6 +49,26 @@ pub fn render_file(path: &Path, config: RenderConfig) -> Frame {
 /// One frame of scene text (TOML).
 pub fn render_toml(text: &str, config: RenderConfig) -> Frame {
     render_desc(scenes::load_toml(text).unwrap(), config)
+}
+
+/// `render(kind)` for every integrator on a pool of 1, then of 2 threads:
+/// `(threads, integrator, film)` in that order (recursive then wavefront
+/// on 1 thread, then on 2), for tests that ask for the same image
+/// whatever the integrator and the thread count.
+pub fn on_one_and_two_threads(
+    render: impl Fn(IntegratorKind) -> Film + Sync,
+) -> Vec<(usize, IntegratorKind, Film)> {
+    let mut films = Vec::new();
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        for kind in IntegratorKind::ALL {
+            films.push((threads, kind, pool.install(|| render(kind))));
+        }
+    }
+    films
 }
 
 /// A game's own world and schedule with `plugin` added.

@@ -22,7 +22,7 @@ use prism::scene::environment::{Environment, EnvironmentMap, EnvironmentSource};
 use prism::scene::material::Material;
 
 use crate::common::images::{assert_same_image, film_bits};
-use crate::common::render::{config, render_desc, render_toml};
+use crate::common::render::{config, on_one_and_two_threads, render_desc, render_toml};
 
 fn settings(w: u32, h: u32, spp: u32, max_depth: u32, transport: Transport) -> RenderSettings {
     RenderSettings {
@@ -516,21 +516,11 @@ fn integrators_and_thread_counts_agree_with_an_environment() {
         light_samples: 2,
         ..settings(24, 18, 4, 4, Transport::Path)
     };
-    let mut films = Vec::new();
-    for threads in [1, 2] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        for kind in IntegratorKind::ALL {
-            let f = pool.install(|| {
-                render_desc(desc.clone(), config(s.clone(), kind))
-                    .film
-                    .unwrap()
-            });
-            films.push((threads, kind, f));
-        }
-    }
+    let films = on_one_and_two_threads(|kind| {
+        render_desc(desc.clone(), config(s.clone(), kind))
+            .film
+            .unwrap()
+    });
     let reference = &films[0].2;
     assert!(reference.pixels.iter().all(|p| p.is_finite()));
     for (threads, kind, film) in &films {

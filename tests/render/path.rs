@@ -13,7 +13,7 @@ use prism::integrators::IntegratorKind;
 use prism::scene::camera::{Camera, CameraRays};
 
 use crate::common::images::assert_same_image;
-use crate::common::render::{config, render_toml};
+use crate::common::render::{config, on_one_and_two_threads, render_toml};
 use crate::common::{assets, render};
 
 /// Renders scene text (TOML) with `settings`; returns the film.
@@ -404,20 +404,7 @@ fn path_traced_images_agree_between_integrators_and_thread_counts() {
             sampler,
             ..path_settings(24, 4, 6)
         };
-        let mut films = Vec::new();
-        for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            for kind in IntegratorKind::ALL {
-                films.push((
-                    threads,
-                    kind,
-                    pool.install(|| render_file(&path, &settings, kind)),
-                ));
-            }
-        }
+        let mut films = on_one_and_two_threads(|kind| render_file(&path, &settings, kind));
         let (_, _, reference) = &films[0];
         assert!(reference.pixels.iter().any(|p| p.max_element() > 0.0));
         for (threads, kind, film) in &films {
@@ -479,20 +466,7 @@ fn split_paths_keep_the_white_furnace_and_agree_between_integrators() {
             sampler,
             ..path_settings(24, 4, 6)
         };
-        let mut films = Vec::new();
-        for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            for kind in IntegratorKind::ALL {
-                films.push((
-                    threads,
-                    kind,
-                    pool.install(|| render_file(&path, &settings, kind)),
-                ));
-            }
-        }
+        let films = on_one_and_two_threads(|kind| render_file(&path, &settings, kind));
         let (_, _, reference) = &films[0];
         assert!(reference.pixels.iter().any(|p| p.max_element() > 0.0));
         for (threads, kind, film) in &films {
