@@ -462,7 +462,12 @@ impl<'a> TriangleBatch<'a> {
         for group in sorted.groups() {
             let g = Group::new(&sorted, group, rays);
             let mut best_t = [f32::INFINITY; WIDTH];
-            let mut best = [(u32::MAX, 0.0f32, 0.0f32); WIDTH];
+            // The nearest triangle so far and its barycentrics, one array
+            // each: a tuple array had its two floats stored one by one
+            // and reloaded as a pair, which stalled store forwarding.
+            let mut best_tri = [u32::MAX; WIDTH];
+            let mut best_b1 = [0.0f32; WIDTH];
+            let mut best_b2 = [0.0f32; WIDTH];
             let mut tied: LaneMask = 0;
             for tri in &self.tris {
                 let Some(c) = self.candidates::<AVX512>(tri, &g, &best_t, g.valid) else {
@@ -475,7 +480,7 @@ impl<'a> TriangleBatch<'a> {
                     pass &= pass - 1;
                     // Up to one ulp past a known hit, so that an equal
                     // `t` is seen (and the ray handed on).
-                    let reach = if best[l].0 == u32::MAX {
+                    let reach = if best_tri[l] == u32::MAX {
                         f32::INFINITY
                     } else {
                         best_t[l].next_up()
@@ -486,7 +491,9 @@ impl<'a> TriangleBatch<'a> {
                     {
                         if t < best_t[l] {
                             best_t[l] = t;
-                            best[l] = (c.block.first + c.j as u32, b1, b2);
+                            best_tri[l] = c.block.first + c.j as u32;
+                            best_b1[l] = b1;
+                            best_b2[l] = b2;
                             tied &= !(1 << l);
                         } else {
                             tied |= 1 << l;
@@ -498,10 +505,10 @@ impl<'a> TriangleBatch<'a> {
                 let o = &mut out[i as usize];
                 if tied & (1 << l) != 0 {
                     *o = self.scene.intersect(&rays[i as usize], 0.0, f32::INFINITY);
-                } else if best[l].0 == u32::MAX {
+                } else if best_tri[l] == u32::MAX {
                     *o = None;
                 } else {
-                    let (triangle, b1, b2) = best[l];
+                    let (triangle, b1, b2) = (best_tri[l], best_b1[l], best_b2[l]);
                     let t = best_t[l];
                     let local = LocalHit::Mesh(MeshHit {
                         t,
