@@ -32,6 +32,14 @@
 //! on the AVX2 path, 0.80x on the portable one. Every triangle tested
 //! without the skipping tests was no faster than the BVH (the shadow rays
 //! 1.8x slower).
+//!
+//! The triangles of each BVH leaf are kept together with their joint box
+//! ([`Cluster`]), tested first for the whole group: on the Cornell box
+//! its nine leaves are the five walls, the ceiling with the light, and the
+//! two blocks in two leaves each, so most lanes skip the blocks' 22
+//! triangles at once. One thread, 8 spp, alternating pinned runs with the
+//! batch without it (same images): 0.96x the time on the AVX-512 path
+//! (11 pairs, ratio of medians; minima 0.95x), 0.98x on the AVX2 path.
 
 use crate::accel::packet::LaneMask;
 use crate::core::math::Ray;
@@ -65,6 +73,25 @@ pub struct TriangleBatch<'a> {
     /// Every triangle, in the BVH's leaf order (neighbours together;
     /// largest first measured slower, 1.01x the time).
     tris: Vec<TriCull>,
+    /// The triangles of each leaf block with their joint box: a group
+    /// tests a block's triangles only with the lanes that may meet it.
+    clusters: Vec<Cluster>,
+}
+
+/// The triangles `tris[start..end]` of one leaf block and the smallest box
+/// holding their padded boxes. A lane that this box leaves out (the same
+/// test, [`Rays16::crossing`]) is left out by each triangle's own box:
+/// the slab distances are monotone in the box's faces (each operation is
+/// correctly rounded), so the joint box's entry is no later and its exit
+/// no earlier; where a slab distance is not a number (a ray in the plane of
+/// a face), the ray lies outside every triangle, which sits strictly
+/// inside its padded box and so strictly inside the joint one.
+#[derive(Clone, Copy, Debug)]
+struct Cluster {
+    lo: [f32; 3],
+    hi: [f32; 3],
+    start: u32,
+    end: u32,
 }
 
 /// One triangle: where its corners are, and what the tests that skip
@@ -375,7 +402,9 @@ impl<'a> TriangleBatch<'a> {
         }
         let blocks = mesh.leaf_blocks()?;
         let mut tris = Vec::with_capacity(mesh.triangle_count());
+        let mut clusters = Vec::with_capacity(blocks.len());
         for (b, block) in blocks.iter().enumerate() {
+            let start = tris.len() as u32;
             for j in 0..block.count as usize {
                 let [p0, p1, p2] = block.corners(j);
                 let (lo, hi) = (p0.min(p1).min(p2), p0.max(p1).max(p2));
@@ -394,11 +423,28 @@ impl<'a> TriangleBatch<'a> {
                     nd: n,
                 });
             }
+            let mine = &tris[start as usize..];
+            if let Some(first) = mine.first() {
+                let (mut lo, mut hi) = (first.lo, first.hi);
+                for t in mine {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(t.lo[a]);
+                        hi[a] = hi[a].max(t.hi[a]);
+                    }
+                }
+                clusters.push(Cluster {
+                    lo,
+                    hi,
+                    start,
+                    end: tris.len() as u32,
+                });
+            }
         }
         Some(TriangleBatch {
             scene,
             blocks,
             tris,
+            clusters,
         })
     }
 
@@ -469,34 +515,40 @@ impl<'a> TriangleBatch<'a> {
             let mut best_b1 = [0.0f32; WIDTH];
             let mut best_b2 = [0.0f32; WIDTH];
             let mut tied: LaneMask = 0;
-            for tri in &self.tris {
-                let Some(c) = self.candidates::<AVX512>(tri, &g, &best_t, g.valid) else {
+            for cl in &self.clusters {
+                let near = g.rays.crossing::<AVX512>(&cl.lo, &cl.hi, &best_t) & g.valid;
+                if near == 0 {
                     continue;
-                };
-                let corners = c.block.corners(c.j);
-                let mut pass = c.pass;
-                while pass != 0 {
-                    let l = pass.trailing_zeros() as usize;
-                    pass &= pass - 1;
-                    // Up to one ulp past a known hit, so that an equal
-                    // `t` is seen (and the ray handed on).
-                    let reach = if best_tri[l] == u32::MAX {
-                        f32::INFINITY
-                    } else {
-                        best_t[l].next_up()
+                }
+                for tri in &self.tris[cl.start as usize..cl.end as usize] {
+                    let Some(c) = self.candidates::<AVX512>(tri, &g, &best_t, near) else {
+                        continue;
                     };
-                    let w = &sorted.wt[group[l] as usize];
-                    if let Some((t, b1, b2)) =
-                        w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach)
-                    {
-                        if t < best_t[l] {
-                            best_t[l] = t;
-                            best_tri[l] = c.block.first + c.j as u32;
-                            best_b1[l] = b1;
-                            best_b2[l] = b2;
-                            tied &= !(1 << l);
+                    let corners = c.block.corners(c.j);
+                    let mut pass = c.pass;
+                    while pass != 0 {
+                        let l = pass.trailing_zeros() as usize;
+                        pass &= pass - 1;
+                        // Up to one ulp past a known hit, so that an equal
+                        // `t` is seen (and the ray handed on).
+                        let reach = if best_tri[l] == u32::MAX {
+                            f32::INFINITY
                         } else {
-                            tied |= 1 << l;
+                            best_t[l].next_up()
+                        };
+                        let w = &sorted.wt[group[l] as usize];
+                        if let Some((t, b1, b2)) =
+                            w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach)
+                        {
+                            if t < best_t[l] {
+                                best_t[l] = t;
+                                best_tri[l] = c.block.first + c.j as u32;
+                                best_b1[l] = b1;
+                                best_b2[l] = b2;
+                                tied &= !(1 << l);
+                            } else {
+                                tied |= 1 << l;
+                            }
                         }
                     }
                 }
@@ -540,24 +592,30 @@ impl<'a> TriangleBatch<'a> {
             let reach: [f32; WIDTH] = std::array::from_fn(|l| t_max[group[l.min(m - 1)] as usize]);
             let g = Group::new(&sorted, group, rays);
             let mut open = g.valid;
-            for tri in &self.tris {
-                let Some(c) = self.candidates::<AVX512>(tri, &g, &reach, open) else {
+            'clusters: for cl in &self.clusters {
+                let near = g.rays.crossing::<AVX512>(&cl.lo, &cl.hi, &reach) & open;
+                if near == 0 {
                     continue;
-                };
-                let corners = c.block.corners(c.j);
-                let mut pass = c.pass;
-                while pass != 0 {
-                    let l = pass.trailing_zeros() as usize;
-                    pass &= pass - 1;
-                    let w = &sorted.wt[group[l] as usize];
-                    if w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach[l])
-                        .is_some()
-                    {
-                        open &= !(1 << l);
-                    }
                 }
-                if open == 0 {
-                    break;
+                for tri in &self.tris[cl.start as usize..cl.end as usize] {
+                    let Some(c) = self.candidates::<AVX512>(tri, &g, &reach, open & near) else {
+                        continue;
+                    };
+                    let corners = c.block.corners(c.j);
+                    let mut pass = c.pass;
+                    while pass != 0 {
+                        let l = pass.trailing_zeros() as usize;
+                        pass &= pass - 1;
+                        let w = &sorted.wt[group[l] as usize];
+                        if w.finish_lane_normal(corners, tri.nd, &c.e, &c.b, l, 0.0, reach[l])
+                            .is_some()
+                        {
+                            open &= !(1 << l);
+                        }
+                    }
+                    if open == 0 {
+                        break 'clusters;
+                    }
                 }
             }
             for (l, &i) in group.iter().enumerate() {
