@@ -24,6 +24,10 @@ points, the time Prism needs for that error read off its own points
 (log-log interpolation), which does not assume the time^-1/2 law: Prism's
 Sobol sampler converges faster than that, so its c falls with spp.
 
+`--prism-spp 2,4,8,16,32` with `--spp 4,8,16,32` gives Prism points below
+Mitsuba's lowest, so that Mitsuba's noisiest error is read between two of
+Prism's points rather than extrapolated.
+
 Make the reference with Mitsuba at 4096 spp and another seed:
   ~/.cache/peers-venv/bin/python ../shared/peers/mitsuba_render.py SCENE.gltf -o REF.exr \
       --width 320 --height 240 --spp 4096 --max-depth 18 --seed 1
@@ -88,6 +92,10 @@ def main():
     ap.add_argument("--reference", required=True)
     ap.add_argument("--prism", default="target/release/prism")
     ap.add_argument("--spp", default="16,64,256")
+    ap.add_argument("--prism-spp", default=None,
+                    help="Prism's spp values (default: --spp); give lower ones too so that "
+                         "Mitsuba's noisiest error is read between two of Prism's points "
+                         "instead of extrapolated")
     ap.add_argument("--integrators", default="recursive,wavefront")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
@@ -95,17 +103,21 @@ def main():
     ref = load(a.reference)
     tmp = tempfile.mkdtemp(prefix="equal_error_")
     rows = {}
-    for spp in [int(s) for s in a.spp.split(",")]:
+    mitsuba_spp = [int(s) for s in a.spp.split(",")]
+    prism_spp = [int(s) for s in (a.prism_spp or a.spp).split(",")]
+    for spp in sorted(set(mitsuba_spp) | set(prism_spp)):
         times = {}
         errs = {}
         for r in range(a.rounds):
-            for integ in a.integrators.split(","):
-                out = os.path.join(tmp, "prism_%s.exr" % integ)
-                times.setdefault("prism " + integ, []).append(run_prism(a.prism, a.scene, out, spp, integ, a.threads))
-                errs["prism " + integ] = mre(load(out), ref)
-            out = os.path.join(tmp, "mitsuba.exr")
-            times.setdefault("mitsuba", []).append(run_mitsuba(sys.executable, a.scene, out, spp, a.threads, 0))
-            errs["mitsuba"] = mre(load(out), ref)
+            if spp in prism_spp:
+                for integ in a.integrators.split(","):
+                    out = os.path.join(tmp, "prism_%s.exr" % integ)
+                    times.setdefault("prism " + integ, []).append(run_prism(a.prism, a.scene, out, spp, integ, a.threads))
+                    errs["prism " + integ] = mre(load(out), ref)
+            if spp in mitsuba_spp:
+                out = os.path.join(tmp, "mitsuba.exr")
+                times.setdefault("mitsuba", []).append(run_mitsuba(sys.executable, a.scene, out, spp, a.threads, 0))
+                errs["mitsuba"] = mre(load(out), ref)
         for k in times:
             t = statistics.median(times[k])
             rows.setdefault(k, []).append((spp, t, errs[k]))
