@@ -451,13 +451,16 @@ const HOW_LEAF: u32 = 1;
 struct Plan {
     /// Primitives below each binary node.
     counts: Vec<AtomicU32>,
-    /// `C(n, i)` for `i` = 1..=7 as float bits, seven per node.
-    cost: Vec<AtomicU32>,
     /// Per node: [`HOW_LEAF`]; in bits `4 (i - 1)..4 i` for `i` = 2..=7,
     /// the roots the first half takes in `C(n, i)` (0: the subtree is
-    /// one root); in bits 28..32 those it takes under `n` as a node.
+    /// one root); in bits 28..32 those it takes under `n` as a node. (The
+    /// costs themselves are needed only by the parent, and are handed up
+    /// on the way, not stored.)
     how: Vec<AtomicU32>,
 }
+
+/// `C(n, i)` for `i` = 1..=7 of a planned subtree and its primitive count.
+type Costs = (u32, [f32; 7]);
 
 impl Plan {
     fn new(bvh2: &Bvh2, max_leaf: u32, parallel: bool) -> Self {
@@ -471,7 +474,6 @@ impl Plan {
         };
         let plan = Plan {
             counts: zeros(n),
-            cost: zeros(7 * n),
             how: zeros(n),
         };
         if n == 0 {
@@ -483,17 +485,16 @@ impl Plan {
         }
         // The top levels split between threads, each subtree below
         // planned serially.
-        fn split(plan: &Plan, bvh2: &Bvh2, i: u32, depth: u32, max_leaf: u32) {
+        fn split(plan: &Plan, bvh2: &Bvh2, i: u32, depth: u32, max_leaf: u32) -> Costs {
             let n = &bvh2.nodes[i as usize];
             if depth == 0 || n.is_leaf() {
-                plan.below(bvh2, i, max_leaf);
-                return;
+                return plan.below(bvh2, i, max_leaf);
             }
-            rayon::join(
+            let (l, r) = rayon::join(
                 || split(plan, bvh2, n.first_index, depth - 1, max_leaf),
                 || split(plan, bvh2, n.first_index + 1, depth - 1, max_leaf),
             );
-            plan.fill(bvh2, i, max_leaf);
+            plan.fill(bvh2, i, max_leaf, Some((&l, &r)))
         }
         split(&plan, bvh2, 0, 6, max_leaf);
         plan
@@ -501,11 +502,6 @@ impl Plan {
 
     fn count(&self, i: u32) -> u32 {
         self.counts[i as usize].load(Ordering::Relaxed)
-    }
-
-    /// `C(n, i)`, `i` in 1..=7.
-    fn cost(&self, n: u32, i: usize) -> f32 {
-        f32::from_bits(self.cost[7 * n as usize + i - 1].load(Ordering::Relaxed))
     }
 
     fn how(&self, n: u32) -> u32 {
@@ -540,30 +536,37 @@ impl Plan {
         self.expand(bvh2, first + 1, m - k, out, len);
     }
 
-    /// Plans every node below binary node `root`, children first.
-    fn below(&self, bvh2: &Bvh2, root: u32, max_leaf: u32) {
-        // Post-order without recursion: (node, children done).
+    /// Plans every node below binary node `root`, children first, and
+    /// returns the root's costs.
+    fn below(&self, bvh2: &Bvh2, root: u32, max_leaf: u32) -> Costs {
+        // Post-order without recursion: (node, children done); each
+        // planned node leaves its costs on `done`, where its parent finds
+        // its first half's on top (the second half was planned first).
         let mut stack = vec![(root, false)];
-        while let Some((i, done)) = stack.pop() {
+        let mut done: Vec<Costs> = Vec::new();
+        while let Some((i, children_done)) = stack.pop() {
             let n = &bvh2.nodes[i as usize];
-            if !n.is_leaf() && !done {
+            if n.is_leaf() {
+                done.push(self.fill(bvh2, i, max_leaf, None));
+            } else if !children_done {
                 stack.push((i, true));
                 stack.push((n.first_index, false));
                 stack.push((n.first_index + 1, false));
-                continue;
+            } else {
+                let l = done.pop().expect("first half planned");
+                let r = done.pop().expect("second half planned");
+                done.push(self.fill(bvh2, i, max_leaf, Some((&l, &r))));
             }
-            self.fill(bvh2, i, max_leaf);
         }
+        done.pop().expect("the root planned")
     }
 
-    /// Plans binary node `i`, whose children are planned.
-    fn fill(&self, bvh2: &Bvh2, i: u32, max_leaf: u32) {
+    /// Plans binary node `i` from its halves' costs (`None` for a binary
+    /// leaf) and returns its own.
+    fn fill(&self, bvh2: &Bvh2, i: u32, max_leaf: u32, halves: Option<(&Costs, &Costs)>) -> Costs {
         let n = &bvh2.nodes[i as usize];
         let area = n.aabb.half_area();
-        let set_cost = |k: usize, c: f32| {
-            self.cost[7 * i as usize + k - 1].store(c.to_bits(), Ordering::Relaxed)
-        };
-        if n.is_leaf() {
+        let Some(((cl, l), (cr, r))) = halves else {
             let count = n.prim_count;
             self.counts[i as usize].store(count, Ordering::Relaxed);
             let c = if count <= max_leaf {
@@ -571,14 +574,10 @@ impl Plan {
             } else {
                 area * (NODE_COST + count.div_ceil(max_leaf) as f32 * LEAF_COST)
             };
-            for k in 1..=7 {
-                set_cost(k, c);
-            }
             self.how[i as usize].store(HOW_LEAF, Ordering::Relaxed);
-            return;
-        }
-        let (l, r) = (n.first_index, n.first_index + 1);
-        let count = self.count(l) + self.count(r);
+            return (count, [c; 7]);
+        };
+        let count = cl + cr;
         self.counts[i as usize].store(count, Ordering::Relaxed);
         // Both halves as `j` roots in all, `j` in 2..=8; the first takes
         // `split[j]`.
@@ -586,7 +585,7 @@ impl Plan {
         let mut split = [0u32; WIDTH + 1];
         for j in 2..=WIDTH {
             for k in 1..j {
-                let c = self.cost(l, k) + self.cost(r, j - k);
+                let c = l[k - 1] + r[j - k - 1];
                 if c < both[j] {
                     both[j] = c;
                     split[j] = k as u32;
@@ -606,16 +605,25 @@ impl Plan {
         } else {
             node
         };
-        set_cost(1, whole);
+        let mut costs = [whole; 7];
         for j in 2..=7 {
             if both[j] < whole {
-                set_cost(j, both[j]);
+                costs[j - 1] = both[j];
                 how |= split[j] << (4 * (j - 1));
-            } else {
-                set_cost(j, whole);
             }
         }
         self.how[i as usize].store(how, Ordering::Relaxed);
+        (count, costs)
+    }
+
+    /// The least cost of the whole tree (tests).
+    #[cfg(test)]
+    fn root_cost(bvh2: &Bvh2, max_leaf: u32) -> f32 {
+        let p = Plan {
+            counts: (0..bvh2.nodes.len()).map(|_| AtomicU32::new(0)).collect(),
+            how: (0..bvh2.nodes.len()).map(|_| AtomicU32::new(0)).collect(),
+        };
+        p.below(bvh2, 0, max_leaf).1[0]
     }
 }
 
@@ -758,7 +766,6 @@ mod tests {
             d.x * d.y + d.y * d.z + d.z * d.x
         };
         for max_leaf in [1, 4, 8] {
-            let plan = Plan::new(&bvh2, max_leaf, false);
             let bvh = Bvh8::collapse(&bvh2, &boxes, max_leaf, false);
             let mut sum = bvh2.nodes[0].aabb.half_area() as f64 * NODE_COST as f64;
             let mut leaves = 0;
@@ -778,7 +785,7 @@ mod tests {
                 }
             }
             assert_eq!(leaves, bvh.leaves.len());
-            let planned = plan.cost(0, 1) as f64;
+            let planned = Plan::root_cost(&bvh2, max_leaf) as f64;
             assert!(
                 (sum - planned).abs() <= 1e-4 * planned,
                 "max_leaf {max_leaf}: tree {sum}, plan {planned}"
