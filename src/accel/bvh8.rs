@@ -170,7 +170,7 @@ impl Bvh8 {
         if bvh2.nodes.is_empty() {
             return out;
         }
-        let plan = Plan::new(bvh2, max_leaf, parallel);
+        let (plan, _) = Plan::new(bvh2, max_leaf, parallel);
         let c = Collapse {
             bvh2,
             plan: &plan,
@@ -463,7 +463,8 @@ struct Plan {
 type Costs = (u32, [f32; 7]);
 
 impl Plan {
-    fn new(bvh2: &Bvh2, max_leaf: u32, parallel: bool) -> Self {
+    /// The plan of `bvh2` and the least cost of the whole tree.
+    fn new(bvh2: &Bvh2, max_leaf: u32, parallel: bool) -> (Self, f32) {
         let n = bvh2.nodes.len();
         let zeros = |k: usize| -> Vec<AtomicU32> {
             if parallel {
@@ -477,11 +478,11 @@ impl Plan {
             how: zeros(n),
         };
         if n == 0 {
-            return plan;
+            return (plan, 0.0);
         }
         if !parallel {
-            plan.below(bvh2, 0, max_leaf);
-            return plan;
+            let (_, cost) = plan.below(bvh2, 0, max_leaf);
+            return (plan, cost[0]);
         }
         // The top levels split between threads, each subtree below
         // planned serially.
@@ -496,8 +497,8 @@ impl Plan {
             );
             plan.fill(bvh2, i, max_leaf, Some((&l, &r)))
         }
-        split(&plan, bvh2, 0, 6, max_leaf);
-        plan
+        let (_, cost) = split(&plan, bvh2, 0, 6, max_leaf);
+        (plan, cost[0])
     }
 
     fn count(&self, i: u32) -> u32 {
@@ -615,16 +616,6 @@ impl Plan {
         self.how[i as usize].store(how, Ordering::Relaxed);
         (count, costs)
     }
-
-    /// The least cost of the whole tree (tests).
-    #[cfg(test)]
-    fn root_cost(bvh2: &Bvh2, max_leaf: u32) -> f32 {
-        let p = Plan {
-            counts: (0..bvh2.nodes.len()).map(|_| AtomicU32::new(0)).collect(),
-            how: (0..bvh2.nodes.len()).map(|_| AtomicU32::new(0)).collect(),
-        };
-        p.below(bvh2, 0, max_leaf).1[0]
-    }
 }
 
 /// Appends the primitives below binary node `i`, left to right.
@@ -659,6 +650,18 @@ mod tests {
                 Aabb::new(c - h, c + h)
             })
             .collect()
+    }
+
+    /// obvhs's binary tree over `boxes`, one primitive per leaf.
+    fn binary_tree(boxes: &[Aabb]) -> Bvh2 {
+        obvhs::bvh2::builder::build_bvh2(
+            boxes,
+            obvhs::BvhBuildParams {
+                max_prims_per_leaf: 1,
+                ..obvhs::BvhBuildParams::medium_build()
+            },
+            &mut Default::default(),
+        )
     }
 
     /// Every primitive sits in exactly one leaf, every child box contains
@@ -710,14 +713,7 @@ mod tests {
     #[test]
     fn parallel_collapse_is_the_serial_collapse() {
         let boxes = random_boxes(3000, 11);
-        let bvh2 = obvhs::bvh2::builder::build_bvh2(
-            &boxes,
-            obvhs::BvhBuildParams {
-                max_prims_per_leaf: 1,
-                ..obvhs::BvhBuildParams::medium_build()
-            },
-            &mut Default::default(),
-        );
+        let bvh2 = binary_tree(&boxes);
         let key = |b: &Bvh8| {
             let nodes: Vec<_> = b
                 .nodes
@@ -753,14 +749,7 @@ mod tests {
     #[test]
     fn collapse_costs_what_its_plan_says() {
         let boxes = random_boxes(2000, 3);
-        let bvh2 = obvhs::bvh2::builder::build_bvh2(
-            &boxes,
-            obvhs::BvhBuildParams {
-                max_prims_per_leaf: 1,
-                ..obvhs::BvhBuildParams::medium_build()
-            },
-            &mut Default::default(),
-        );
+        let bvh2 = binary_tree(&boxes);
         let half_area = |lo: Vec3A, hi: Vec3A| {
             let d = hi - lo;
             d.x * d.y + d.y * d.z + d.z * d.x
@@ -785,7 +774,7 @@ mod tests {
                 }
             }
             assert_eq!(leaves, bvh.leaves.len());
-            let planned = Plan::root_cost(&bvh2, max_leaf) as f64;
+            let planned = Plan::new(&bvh2, max_leaf, false).1 as f64;
             assert!(
                 (sum - planned).abs() <= 1e-4 * planned,
                 "max_leaf {max_leaf}: tree {sum}, plan {planned}"
