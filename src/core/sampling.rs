@@ -5,7 +5,7 @@ use std::f32::consts::PI;
 
 use glam::{Vec2, Vec3A};
 
-use crate::core::math::orthonormal_basis;
+use crate::core::math::{orthonormal_basis, sin_cos_octant};
 
 /// Uniform direction on the unit sphere from two numbers in `[0, 1)`.
 #[inline]
@@ -33,19 +33,6 @@ pub fn concentric_disk(u: Vec2) -> Vec2 {
         let (s, c) = sin_cos_octant(PI / 4.0 * (o.x / o.y));
         Vec2::new(o.y * s, o.y * c)
     }
-}
-
-/// `(sin x, cos x)` for `x` in `[-pi/4, pi/4]`, by their Taylor
-/// polynomials to degree 7 and 8 (truncation below `3.2e-7` and `2.5e-8`
-/// there): a few multiplications the core overlaps with other work,
-/// where the library's `sinf`/`cosf` were a call on the sampling chain's
-/// critical path.
-#[inline(always)]
-fn sin_cos_octant(x: f32) -> (f32, f32) {
-    let x2 = x * x;
-    let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0))));
-    let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0))));
-    (s, c)
 }
 
 /// Cosine-weighted direction around the unit normal `n`. Unit to within

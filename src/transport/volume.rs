@@ -69,7 +69,7 @@
 
 use glam::{Vec2, Vec3A};
 
-use crate::core::math::{Color, Ray, max_component};
+use crate::core::math::{Color, Ray, fast_atan2, fast_tan, max_component};
 use crate::core::medium::{Medium, henyey_greenstein, sample_henyey_greenstein};
 use crate::core::optics::{OFFSET_ULPS, offset_origin_relative};
 use crate::core::rng::Sampler;
@@ -576,9 +576,9 @@ fn equiangular(light: &WorldLight, ray: &Ray, t_end: f32) -> Option<Equiangular>
     if !(height > 1e-6 * to.length().max(1e-30)) {
         return None;
     }
-    let theta_a = (-foot).atan2(height);
+    let theta_a = fast_atan2(-foot, height);
     let theta_b = if t_end.is_finite() {
-        (t_end - foot).atan2(height)
+        fast_atan2(t_end - foot, height)
     } else {
         std::f32::consts::FRAC_PI_2
     };
@@ -595,7 +595,7 @@ impl Equiangular {
     #[inline]
     fn sample(&self, u: f32) -> f32 {
         let theta = self.theta_a + u * (self.theta_b - self.theta_a);
-        (self.foot + self.height * theta.tan()).max(0.0)
+        (self.foot + self.height * fast_tan(theta)).max(0.0)
     }
 
     /// The density of drawing ray parameter `t`.

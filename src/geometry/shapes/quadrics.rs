@@ -8,7 +8,7 @@ use glam::{Vec2, Vec3, Vec3A};
 
 use super::ShapeHit;
 use super::roots::{centered_roots, pick_root, project, solve_quadratic};
-use crate::core::math::Ray;
+use crate::core::math::{Ray, fast_atan2};
 
 /// Intersects with the ray re-based at its point closest to `(0, y, 0)`
 /// (the middle of the shape), then shifts `t` back.
@@ -42,7 +42,7 @@ pub(super) fn rebased(
 /// Azimuth `atan2(z, x)` mapped to `[0, 1]`.
 #[inline]
 fn azimuth_u(p: Vec3A) -> f32 {
-    let phi = p.z.atan2(p.x);
+    let phi = fast_atan2(p.z, p.x);
     (if phi < 0.0 { phi + TAU } else { phi }) / TAU
 }
 
