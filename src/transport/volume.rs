@@ -98,6 +98,14 @@ pub fn medium_dimension(depth: u32, crossing: u32) -> u32 {
         .wrapping_add(4 * crossing)
 }
 
+/// First sampler dimension of the set that a scattering event of bounce
+/// `depth` continues with ([`continue_in_medium`]): the set after the
+/// bounce's light samples, a multiple of four.
+#[inline]
+fn continue_dimension(settings: &RenderSettings, depth: u32) -> u32 {
+    bounce_dimension(settings, depth) + 4 * settings.light_samples
+}
+
 /// The medium a ray segment of direction `dir` ran through, read off the
 /// surface it ended on (`None`: it escaped); see the module notes. `None`
 /// for clear space.
@@ -420,9 +428,9 @@ pub fn propagate(
         let t_end = hit.map_or(f32::INFINITY, |h| h.t + lead);
         if let Some(m) = segment_medium(scene, hit.as_ref(), dir) {
             if m.scatters() {
-                sampler.set_dimension(medium_dimension(depth, crossing));
-                let (u_c, u_t) = (sampler.next_f32(), sampler.next_f32());
-                let (u_l, u_e) = (sampler.next_f32(), sampler.next_f32());
+                // One Sobol set: what four `next_f32` calls from the
+                // set's first dimension give, with one look-up.
+                let [u_c, u_t, u_l, u_e] = sampler.set_of_four(medium_dimension(depth, crossing));
                 let carried = throughput * out.weight;
                 let live = [carried.x != 0.0, carried.y != 0.0, carried.z != 0.0];
                 let Some(s) = extinction_for(&m, live, u_c, &mut out.weight) else {
@@ -796,10 +804,9 @@ pub fn continue_in_medium(
     throughput: Color,
     sampler: &mut Sampler,
 ) -> Option<Continuation> {
-    sampler.set_dimension(bounce_dimension(settings, depth) + 4 * settings.light_samples);
-    let u = Vec2::new(sampler.next_f32(), sampler.next_f32());
-    let _lobe = sampler.next_f32();
-    let u_rr = sampler.next_f32();
+    // The bounce's last set (direction, lobe, roulette), drawn at once.
+    let [u0, u1, _lobe, u_rr] = sampler.set_of_four(continue_dimension(settings, depth));
+    let u = Vec2::new(u0, u1);
     if depth >= settings.max_depth {
         return None;
     }
