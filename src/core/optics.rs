@@ -145,6 +145,11 @@ pub const OFFSET_ULPS: f32 = 16.0;
 #[inline]
 pub fn beer_lambert(sigma: Color, distance: f32) -> Color {
     let tau = sigma * distance.max(0.0);
+    // A grey medium (a fog, most absorbing glass) has one optical depth
+    // in every channel: one exponential gives the same three values.
+    if tau.x == tau.y && tau.y == tau.z {
+        return Color::splat(transmit(tau.x));
+    }
     Color::new(transmit(tau.x), transmit(tau.y), transmit(tau.z))
 }
 
@@ -204,6 +209,49 @@ pub fn check_absorption(sigma: Color) -> Result<Color, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A grey medium's one exponential gives, bit for bit, the three that
+    /// each channel's own optical depth gives, also at zero, infinite and
+    /// NaN depths; a coloured medium still gets its own per channel.
+    #[test]
+    fn grey_transmittance_is_each_channels_own() {
+        let per_channel = |s: Color, d: f32| {
+            (s * d.max(0.0))
+                .to_array()
+                .map(|t| if t > 0.0 { (-t).exp() } else { 1.0 })
+        };
+        let sigmas = [0.0, 1e-30, 0.07, 0.5, 1.0, 3.7, 1e3, f32::INFINITY];
+        let distances = [
+            -1.0,
+            0.0,
+            1e-20,
+            0.3,
+            1.0,
+            7.25,
+            1e5,
+            f32::INFINITY,
+            f32::NAN,
+        ];
+        for &s in &sigmas {
+            for &d in &distances {
+                let grey = beer_lambert(Color::splat(s), d).to_array();
+                let own = per_channel(Color::splat(s), d);
+                assert_eq!(
+                    grey.map(f32::to_bits),
+                    own.map(f32::to_bits),
+                    "sigma {s} d {d}"
+                );
+                let coloured = Color::new(s, 0.25, 2.0);
+                let c = beer_lambert(coloured, d).to_array();
+                let own = per_channel(coloured, d);
+                assert_eq!(
+                    c.map(f32::to_bits),
+                    own.map(f32::to_bits),
+                    "sigma {s} d {d}"
+                );
+            }
+        }
+    }
 
     fn unit(theta: f32) -> Vec3A {
         // A direction travelling downwards onto the plane y = 0 at angle
