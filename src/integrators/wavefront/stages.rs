@@ -106,16 +106,29 @@ pub fn generate_camera_rays(
             });
     }
     let seeds: &[SamplerSeed] = seeds;
-    // Path transport: the film position's Sobol set (set 0, which the
-    // lens shares) of the chunk's paths, drawn sixteen side by side
-    // before the rays are made, as the shading stages draw theirs
-    // (`PrimedSets`); none for one sample per pixel (the pixel centre).
-    let film_sets = |range: std::ops::Range<usize>| {
+    // The film position's Sobol set (set 0, which the lens shares) of the
+    // chunk's paths, drawn sixteen side by side before the rays are made,
+    // as the shading stages draw theirs (`PrimedSets`); none for one
+    // sample per pixel (the pixel centre). Path transport keeps each
+    // path's seed for the later bounces; the other transports make the
+    // chunk's seeds here for the camera rays alone (each ray drew its
+    // set by itself before: 3% of a Whitted render of
+    // `assets/bench/diffuse_only.toml`, one thread).
+    let chunk_seeds = |range: std::ops::Range<usize>| -> Vec<SamplerSeed> {
+        if seeds.len() >= range.end * slots {
+            range.map(|local| seeds[local * slots]).collect()
+        } else {
+            keys(range.start)
+                .take(range.len())
+                .map(|k| seed(&k))
+                .collect()
+        }
+    };
+    let film_sets = |chunk: &[SamplerSeed]| {
         let mut sets = Vec::new();
-        if settings.spp > 1 && seeds.len() >= range.end * slots {
-            let requests: Option<Vec<SetRequest>> = range
-                .map(|local| seeds[local * slots].sobol_request(0))
-                .collect();
+        if settings.spp > 1 {
+            let requests: Option<Vec<SetRequest>> =
+                chunk.iter().map(|s| s.sobol_request(0)).collect();
             if let Some(requests) = requests {
                 sets.resize(requests.len(), [0.0; 4]);
                 sobol_sets(&requests, &mut sets);
@@ -124,13 +137,11 @@ pub fn generate_camera_rays(
         sets
     };
     out.fill_chunks(count, |range| {
-        let sets = film_sets(range.clone());
+        let chunk = chunk_seeds(range.clone());
+        let sets = film_sets(&chunk);
         let start = range.start;
         keys(range.start).zip(range).map(move |(k, local)| {
-            let mut sampler = match seeds.get(local * slots) {
-                Some(s) => s.sampler(),
-                None => seed(&k).sampler(),
-            };
+            let mut sampler = chunk[local - start].sampler();
             if let Some(&set) = sets.get(local - start) {
                 sampler.prime((0, set));
             }
