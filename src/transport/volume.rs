@@ -102,7 +102,7 @@ pub fn medium_dimension(depth: u32, crossing: u32) -> u32 {
 /// `depth` continues with ([`continue_in_medium`]): the set after the
 /// bounce's light samples, a multiple of four.
 #[inline]
-fn continue_dimension(settings: &RenderSettings, depth: u32) -> u32 {
+pub fn continue_dimension(settings: &RenderSettings, depth: u32) -> u32 {
     bounce_dimension(settings, depth) + 4 * settings.light_samples
 }
 
