@@ -22,7 +22,9 @@
 //! shape's size) of the edge of a shape's extent or of a polygon's or
 //! triangle's boundary, origins within `1e-3 * size` of the surface, and
 //! near-double roots (two real roots, or a complex pair of a grazing ray,
-//! closer than `1e-3 * size / |d|`).
+//! closer than `1e-3 * size / |d|`), and misses by less than the kernel's
+//! positional error `K * EPS * (|o| + size)` (the distance from the
+//! surface of the line's extremum of `f`, to first order).
 //! Everywhere else the f32 kernel must agree with f64 on *whether* it hits
 //! and on *which* root.
 
@@ -80,6 +82,9 @@ struct Model {
 /// samples are of the shape's own magnitude (sampled from a far origin they
 /// would cancel even in f64).
 fn roots(m: &Model, o: DVec3, d: DVec3) -> Vec<f64> {
+    // The f32 kernel's positional error at this origin (the numerator of
+    // `check`'s tolerance, times `|d|`).
+    let position_error = K * EPS * (o.length() + m.size);
     let t0 = (m.centre - o).dot(d) / d.length_squared();
     let o = o + d * t0;
     let s = m.size / d.length();
@@ -98,6 +103,19 @@ fn roots(m: &Model, o: DVec3, d: DVec3) -> Vec<f64> {
         if disc < 0.0 && (-disc).sqrt() / a.abs() < MARGIN {
             let u = -b / (2.0 * a);
             return vec![t0 + u * s, t0 + u * s];
+        }
+        // Likewise a ray that misses the surface by less than the f32
+        // kernel's positional error: at the line's point nearest the
+        // surface (the quadratic's extremum, where `f` is `-disc / 4a`),
+        // `|f| / |grad f|` is its distance to first order. Far origins
+        // and thin shapes make such a miss a wide complex pair (a miss by
+        // 1e-4 of a 0.15-thick ellipsoid seen from 3,000 units away).
+        if disc < 0.0 {
+            let u = -b / (2.0 * a);
+            let gap = (-disc / (4.0 * a)).abs() / (m.grad)(o + d * (u * s)).length();
+            if gap < position_error {
+                return vec![t0 + u * s, t0 + u * s];
+            }
         }
         if disc < 0.0 {
             return vec![];
@@ -295,6 +313,37 @@ fn quadric() -> impl Strategy<Value = Shape> {
     ]
 }
 
+/// One case of `quadrics_match_f64`: a ray from `from` (in shape sizes
+/// from the centre) aimed at the point `aim` of the bounding box (in half
+/// extents), direction of length `10^len`.
+fn aimed_quadric_ray(shape: &Shape, from: Vec3, aim: Vec3, len: f32) -> Result<(), TestCaseError> {
+    let (lo, hi) = shape.bounds().unwrap();
+    let centre = (lo + hi) * 0.5;
+    let half = (hi - lo) * 0.5;
+    let size = (hi - lo).max_element();
+    let target = centre + half * Vec3A::from(aim);
+    let o = centre + Vec3A::from(from) * size;
+    let d = (target - o).normalize() * 10f32.powf(len);
+    let ray = Ray::new(o, d);
+    let m = quadric_model(shape);
+    check(shape, expect_quadric(&m, d64(o), d64(d)), &ray)
+}
+
+/// A case `quadrics_match_f64` once drew (CI, stop 57): a ray from about
+/// 3,000 units away grazing a thin ellipsoid (cosine 0.003), which the f32
+/// kernel hits and f64 misses by about 1e-4, less than the kernel's
+/// positional error there. Excluded as a near miss; before that exclusion
+/// the case failed.
+#[test]
+fn far_grazing_miss_of_a_thin_ellipsoid_is_excluded() {
+    let shape = Shape::Ellipsoid {
+        radii: Vec3::new(0.14836305, 1.3341385, 3.3253531),
+    };
+    let from = Vec3::new(252.9947, -395.1806, -53.262596);
+    let aim = Vec3::new(-0.5162322, 1.0894126, 0.18055613);
+    aimed_quadric_ray(&shape, from, aim, -0.08093561).unwrap();
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 4000, failure_persistence: None, ..ProptestConfig::default() })]
 
@@ -302,16 +351,7 @@ proptest! {
     /// from near and far.
     #[test]
     fn quadrics_match_f64(shape in quadric(), from in origin(), aim in vec3(-1.2..1.2), len in -2.0f32..2.0) {
-        let (lo, hi) = shape.bounds().unwrap();
-        let centre = (lo + hi) * 0.5;
-        let half = (hi - lo) * 0.5;
-        let size = (hi - lo).max_element();
-        let target = centre + half * Vec3A::from(aim);
-        let o = centre + Vec3A::from(from) * size;
-        let d = (target - o).normalize() * 10f32.powf(len);
-        let ray = Ray::new(o, d);
-        let m = quadric_model(&shape);
-        check(&shape, expect_quadric(&m, d64(o), d64(d)), &ray)?;
+        aimed_quadric_ray(&shape, from, aim, len)?;
     }
 
     /// Arbitrary directions (most miss) from origins inside and outside.
