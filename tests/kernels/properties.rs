@@ -116,8 +116,6 @@ fn roots(m: &Model, o: DVec3, d: DVec3) -> Vec<f64> {
             if gap < position_error {
                 return vec![t0 + u * s, t0 + u * s];
             }
-        }
-        if disc < 0.0 {
             return vec![];
         }
         let q = -0.5 * (b + disc.sqrt().copysign(b));
