@@ -5,6 +5,7 @@
 
 pub mod cli;
 pub mod images;
+pub mod prop;
 pub mod render;
 pub mod rng;
 pub mod scenes;

@@ -343,7 +343,7 @@ fn far_grazing_miss_of_a_thin_ellipsoid_is_excluded() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 4000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(crate::common::prop::config(4000))]
 
     /// Rays aimed near the shape (at a random point of its bounding box)
     /// from near and far.

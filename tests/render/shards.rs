@@ -195,7 +195,7 @@ fn cut(len: u32, pieces: usize, picks: &[u32]) -> Vec<Range<u32>> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(crate::common::prop::config(12))]
 
     /// Any grid of rectangles, each cut into any sample ranges, merges to
     /// the single render.
