@@ -531,29 +531,38 @@ fn punctual_in_segment(
         let tr = shadow_transmittance(scene, &Ray::new(p, ls.wi), ls.distance);
         radiance += l * tr;
     };
+    // The positioned light chosen for equiangular sampling (its index in
+    // `lights`) and its sampling of this part, computed once: the
+    // scattering point's weights below read its density too.
+    let chosen = (positioned > 0).then(|| {
+        let k = ((u.0 * count) as usize).min(positioned - 1);
+        let (i, light) = lights
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| !matches!(l, WorldLight::Directional { .. }))
+            .nth(k)
+            .expect("k < positioned");
+        (i, light, equiangular(light, ray, t_end))
+    });
     if let Some(t) = scatter {
         let pd = distance_pdf(s, t);
         let weight = m.sigma_s / s;
-        for light in lights {
-            let pe = equiangular(light, ray, t_end).map_or(0.0, |e| e.pdf(t) / count);
+        for (i, light) in lights.iter().enumerate() {
+            let e = match chosen {
+                Some((c, _, e)) if c == i => e,
+                _ => equiangular(light, ray, t_end),
+            };
+            let pe = e.map_or(0.0, |e| e.pdf(t) / count);
             gather(light, t, weight, &|_| power_heuristic(1.0, pd, 1.0, pe));
         }
     }
-    if positioned > 0 {
-        let k = ((u.0 * count) as usize).min(positioned - 1);
-        let light = lights
-            .iter()
-            .filter(|l| !matches!(l, WorldLight::Directional { .. }))
-            .nth(k)
-            .expect("k < positioned");
-        if let Some(e) = equiangular(light, ray, t_end) {
-            let t = e.sample(u.1).min(t_end);
-            let pe = e.pdf(t) / count;
-            if pe > 0.0 && pe.is_finite() {
-                let weight = Color::splat((-s * t).exp()) * m.sigma_s / pe;
-                let pd = distance_pdf(s, t);
-                gather(light, t, weight, &|_| power_heuristic(1.0, pe, 1.0, pd));
-            }
+    if let Some((_, light, Some(e))) = chosen {
+        let t = e.sample(u.1).min(t_end);
+        let pe = e.pdf(t) / count;
+        if pe > 0.0 && pe.is_finite() {
+            let weight = Color::splat((-s * t).exp()) * m.sigma_s / pe;
+            let pd = distance_pdf(s, t);
+            gather(light, t, weight, &|_| power_heuristic(1.0, pe, 1.0, pd));
         }
     }
     (radiance, shadows)

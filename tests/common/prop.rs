@@ -13,7 +13,7 @@
 use proptest::test_runner::{Config, RngSeed};
 
 /// Seed of the cases when `PROPTEST_RNG_SEED` is not set.
-pub const SEED: u64 = 0x5eed_0f_a11_ca5e5;
+pub const SEED: u64 = 0x005e_ed0f_a11c_a5e5;
 
 /// `cases` cases from [`SEED`] (or `PROPTEST_RNG_SEED`), with no failure
 /// files written.
