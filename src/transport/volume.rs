@@ -158,8 +158,19 @@ fn is_own_entry(scene: &RenderScene, hit: &Hit, dir: Vec3A) -> bool {
 /// and no numbers drawn; only its ray would restart at the hit point.
 #[inline]
 pub fn is_plain_segment(scene: &RenderScene, hit: Option<&Hit>, dir: Vec3A) -> bool {
-    segment_medium(scene, hit, dir).is_none()
-        && hit.is_none_or(|h| !is_interface(scene, h) && !is_own_entry(scene, h, dir))
+    is_plain_segment_in(scene, segment_medium(scene, hit, dir).as_ref(), hit, dir)
+}
+
+/// [`is_plain_segment`] for a caller that has the segment's medium
+/// already (`medium` is [`segment_medium`]`(scene, hit, dir)`).
+#[inline]
+pub fn is_plain_segment_in(
+    scene: &RenderScene,
+    medium: Option<&Medium>,
+    hit: Option<&Hit>,
+    dir: Vec3A,
+) -> bool {
+    medium.is_none() && hit.is_none_or(|h| !is_interface(scene, h) && !is_own_entry(scene, h, dir))
 }
 
 /// True when `hit` is on an index-matched boundary that rays cross.

@@ -99,21 +99,19 @@ fn roots(m: &Model, o: DVec3, d: DVec3) -> Vec<f64> {
         let disc = b * b - 4.0 * a * c;
         // A complex pair as close together as a near-double root (u is in
         // shape sizes) is a ray grazing the surface: its real part counted
-        // twice, for the near-double-root exclusion to skip it.
-        if disc < 0.0 && (-disc).sqrt() / a.abs() < MARGIN {
-            let u = -b / (2.0 * a);
-            return vec![t0 + u * s, t0 + u * s];
-        }
-        // Likewise a ray that misses the surface by less than the f32
-        // kernel's positional error: at the line's point nearest the
-        // surface (the quadratic's extremum, where `f` is `-disc / 4a`),
-        // `|f| / |grad f|` is its distance to first order. Far origins
-        // and thin shapes make such a miss a wide complex pair (a miss by
-        // 1e-4 of a 0.15-thick ellipsoid seen from 3,000 units away).
+        // twice, for the near-double-root exclusion to skip it. Likewise a
+        // ray that misses the surface by less than the f32 kernel's
+        // positional error: at the line's point nearest the surface (the
+        // quadratic's extremum, where `f` is `-disc / 4a`), `|f| / |grad
+        // f|` is its distance to first order. Far origins and thin shapes
+        // make such a miss a wide complex pair (a miss by 1e-4 of a
+        // 0.15-thick ellipsoid seen from 3,000 units away).
         if disc < 0.0 {
             let u = -b / (2.0 * a);
-            let gap = (-disc / (4.0 * a)).abs() / (m.grad)(o + d * (u * s)).length();
-            if gap < position_error {
+            let grazing = (-disc).sqrt() / a.abs() < MARGIN;
+            let near_miss =
+                || (-disc / (4.0 * a)).abs() / (m.grad)(o + d * (u * s)).length() < position_error;
+            if grazing || near_miss() {
                 return vec![t0 + u * s, t0 + u * s];
             }
             return vec![];

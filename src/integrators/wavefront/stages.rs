@@ -427,31 +427,30 @@ pub fn sample_media(
         // A segment through no medium to a surface it does not cross (or
         // out of the scene) stays as it is: only routed, with no sampler
         // made, no copy of the ray and its hit. The others start a walk.
-        for i in range.clone() {
-            if !volume::is_plain_segment(scene, found_in.0[i].as_ref(), rays_in.direction[i]) {
-                walks.push(i as u32);
-            }
-        }
         // Each walk's first step draws two Sobol sets, the medium's and
-        // the continuation's: drawn here for all the chunk's walks,
-        // sixteen side by side ([`sobol_sets`]), as the shading stages
-        // draw theirs. Later steps, one walk at a time, draw their own.
-        for (k, &i) in walks.iter().enumerate() {
-            let i = i as usize;
-            // (Only where the first part runs through a scattering medium,
-            // which is when the step draws them.)
-            let medium =
-                volume::segment_medium(scene, found_in.0[i].as_ref(), rays_in.direction[i]);
+        // the continuation's, when its first part runs through a
+        // scattering medium: requested here for all the chunk's walks and
+        // drawn sixteen side by side ([`sobol_sets`]), as the shading
+        // stages draw theirs. Later steps, one walk at a time, draw their
+        // own.
+        for i in range.clone() {
+            let (hit, dir) = (found_in.0[i].as_ref(), rays_in.direction[i]);
+            let medium = volume::segment_medium(scene, hit, dir);
+            if volume::is_plain_segment_in(scene, medium.as_ref(), hit, dir) {
+                continue;
+            }
+            let k = walks.len() as u32;
+            walks.push(i as u32);
             if !medium.is_some_and(|m| m.scatters()) {
                 continue;
             }
             let (path, depth) = (rays_in.path[i], rays_in.depth[i]);
             let seed = &seeds[path as usize];
-            let medium = seed.sobol_request(volume::medium_dimension(depth, 0) / 4);
-            let next = seed.sobol_request(volume::continue_dimension(settings, depth) / 4);
-            if let (Some(m), Some(n)) = (medium, next) {
+            let medium_set = seed.sobol_request(volume::medium_dimension(depth, 0) / 4);
+            let next_set = seed.sobol_request(volume::continue_dimension(settings, depth) / 4);
+            if let (Some(m), Some(n)) = (medium_set, next_set) {
                 requests.extend([m, n]);
-                owners.push(k as u32);
+                owners.push(k);
             }
         }
         first_sets.resize(requests.len(), [0.0; 4]);
