@@ -104,6 +104,12 @@ struct TriCull {
     /// Its bounding box, padded strictly outwards ([`Rays16::crossing`]).
     lo: [f32; 3],
     hi: [f32; 3],
+    /// Whether that box differs from its cluster's. When it does not (a
+    /// quad's two triangles, whose boxes are the quad's), the cluster's
+    /// test has already kept exactly the lanes that the triangle's own
+    /// would keep, up to the closer hits found since, which its plane and
+    /// edge tests still see: the box test is a filter, never the answer.
+    own_box: bool,
     /// Its plane: the normal `(p1 - p0) x (p2 - p0)` rounded to f32, and
     /// `p0` ([`Rays16::crossing_plane`]).
     n: [f32; 3],
@@ -418,6 +424,7 @@ impl<'a> TriangleBatch<'a> {
                     lane: j as u32,
                     lo: (lo - pad).to_array().map(f32::next_down),
                     hi: (hi + pad).to_array().map(f32::next_up),
+                    own_box: true,
                     n: n.as_vec3().to_array(),
                     p0: p0.to_array(),
                     nd: n,
@@ -431,6 +438,9 @@ impl<'a> TriangleBatch<'a> {
                         lo[a] = lo[a].min(t.lo[a]);
                         hi[a] = hi[a].max(t.hi[a]);
                     }
+                }
+                for t in &mut tris[start as usize..] {
+                    t.own_box = t.lo != lo || t.hi != hi;
                 }
                 clusters.push(Cluster {
                     lo,
@@ -473,7 +483,11 @@ impl<'a> TriangleBatch<'a> {
         t_hi: &[f32; WIDTH],
         mask: LaneMask,
     ) -> Option<Candidates<'a>> {
-        let near = group.rays.crossing::<AVX512>(&tri.lo, &tri.hi, t_hi) & mask;
+        let near = if tri.own_box {
+            group.rays.crossing::<AVX512>(&tri.lo, &tri.hi, t_hi) & mask
+        } else {
+            mask
+        };
         if near == 0 {
             return None;
         }
