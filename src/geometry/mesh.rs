@@ -1158,12 +1158,20 @@ impl Mesh {
         }
     }
 
+    /// The unnormalised object-space normal `(p1 - p0) x (p2 - p0)` of
+    /// triangle `triangle` (BVH order): [`MeshSurface::geometric_normal`].
+    #[inline(always)]
+    pub fn geometric_normal(&self, triangle: u32) -> Vec3A {
+        let [p0, p1, p2] = self.corners[triangle as usize];
+        (p1 - p0).cross(p2 - p0)
+    }
+
     /// Normals and texture coordinates at a hit.
     pub fn surface(&self, hit: &MeshHit) -> MeshSurface {
         let [i0, i1, i2] = self.triangles[hit.triangle as usize].map(|i| i as usize);
         let [p0, p1, p2] = self.corners[hit.triangle as usize];
         let b0 = 1.0 - hit.b1 - hit.b2;
-        let geometric_normal = (p1 - p0).cross(p2 - p0);
+        let geometric_normal = self.geometric_normal(hit.triangle);
         let shading_normal = match &self.normals {
             Some(ns) => {
                 let n = ns[i0] * b0 + ns[i1] * hit.b1 + ns[i2] * hit.b2;

@@ -22,7 +22,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use crate::accel::build::BuildQuality;
 use crate::core::settings::Accel;
@@ -53,6 +53,12 @@ pub(crate) struct MergedMeshes {
     /// For each triangle of the merged mesh (its BVH order): the instance
     /// it belongs to and its index in that instance's mesh (BVH order).
     owners: Vec<(u32, u32)>,
+    /// For each triangle of the merged mesh: its owner's geometric normal
+    /// in world space, as a hit on it computes it
+    /// (`InstanceTransform::normal` of [`Mesh::geometric_normal`]), so
+    /// that a hit reads it instead (the group is undone by any change to
+    /// a member's placement or mesh).
+    normals: Vec<Vec3A>,
     /// True for the instances merged, per instance index.
     member: Vec<bool>,
 }
@@ -131,8 +137,18 @@ impl MergedMeshes {
         // Corners transformed by a valid placement stay finite; the
         // instances' bounds were checked against the builder's range.
         let mesh = Mesh::new("merged instances", data, NormalMode::Flat, quality).ok()?;
-        let owners = (0..mesh.triangle_count())
+        let owners: Vec<(u32, u32)> = (0..mesh.triangle_count())
             .map(|b| source[mesh.input_triangle(b) as usize])
+            .collect();
+        let normals = owners
+            .iter()
+            .map(|&(i, t)| {
+                let inst = &instances[i as usize];
+                let InstanceGeometry::Mesh(m) = &inst.geometry else {
+                    unreachable!("members are meshes")
+                };
+                inst.transform.normal(m.geometric_normal(t))
+            })
             .collect();
         Some(Self {
             instance: Instance::new(
@@ -141,6 +157,7 @@ impl MergedMeshes {
                 0,
             ),
             owners,
+            normals,
             member,
         })
     }
@@ -159,6 +176,13 @@ impl MergedMeshes {
     #[inline(always)]
     pub(crate) fn owner(&self, triangle: u32) -> (u32, u32) {
         self.owners[triangle as usize]
+    }
+
+    /// The world geometric normal of a hit on triangle `triangle` (BVH
+    /// order) of the merged mesh (see [`MergedMeshes::normals`]).
+    #[inline(always)]
+    pub(crate) fn normal(&self, triangle: u32) -> Vec3A {
+        self.normals[triangle as usize]
     }
 
     /// True when instance `index` is merged.
@@ -193,8 +217,10 @@ impl MergedMeshes {
         self.member.swap_remove(index as usize);
     }
 
-    /// Bytes of the merged copy (triangles, BVH, owners).
+    /// Bytes of the merged copy (triangles, BVH, owners, normals).
     pub(crate) fn bytes(&self) -> usize {
-        self.mesh().accel_bytes() + self.owners.len() * std::mem::size_of::<(u32, u32)>()
+        self.mesh().accel_bytes()
+            + self.owners.len() * std::mem::size_of::<(u32, u32)>()
+            + self.normals.len() * std::mem::size_of::<Vec3A>()
     }
 }

@@ -963,12 +963,17 @@ impl RenderScene {
     #[inline(always)]
     pub(super) fn finish_hit_inline(&self, t: f32, index: u32, local: LocalHit) -> Hit {
         // A hit on the merged group becomes one on the instance it merged.
-        let (index, local) = match (&self.merged, local) {
+        // (With its world geometric normal, which the group keeps.)
+        let (index, local, merged_gn) = match (&self.merged, local) {
             (Some(g), LocalHit::Mesh(h)) if index == MERGED => {
                 let (instance, triangle) = g.owner(h.triangle);
-                (instance, LocalHit::Mesh(MeshHit { triangle, ..h }))
+                (
+                    instance,
+                    LocalHit::Mesh(MeshHit { triangle, ..h }),
+                    Some(g.normal(h.triangle)),
+                )
             }
-            _ => (index, local),
+            _ => (index, local, None),
         };
         let inst = &self.instances[index as usize];
         let xf = &inst.transform;
@@ -993,7 +998,7 @@ impl RenderScene {
                     tangents = m.uv_tangents(h.triangle);
                 }
                 let s = m.surface(&h);
-                let gn = xf.normal(s.geometric_normal);
+                let gn = merged_gn.unwrap_or_else(|| xf.normal(s.geometric_normal));
                 let mut sn = xf.normal(s.shading_normal);
                 if sn.dot(gn) < 0.0 {
                     sn = -sn;

@@ -483,7 +483,10 @@ impl<'a> TriangleBatch<'a> {
         t_hi: &[f32; WIDTH],
         mask: LaneMask,
     ) -> Option<Candidates<'a>> {
-        let near = if tri.own_box {
+        // (On the AVX-512 path, where the test is one register, the branch
+        // cost more than the test: 1.006x the time, against 0.98x on the
+        // AVX2 path; 7 pinned pairs each.)
+        let near = if AVX512 || tri.own_box {
             group.rays.crossing::<AVX512>(&tri.lo, &tri.hi, t_hi) & mask
         } else {
             mask
