@@ -148,7 +148,7 @@ impl Bvh8 {
 
     /// Collapses `bvh2` (built over `boxes`) into 8-wide nodes, choosing
     /// the collapse of least cost under the surface area heuristic
-    /// ([`Plan`]): which binary subtrees of at most `max_leaf` primitives
+    /// (`Plan`): which binary subtrees of at most `max_leaf` primitives
     /// become one leaf (its primitives in increasing order), and which
     /// binary descendants, up to eight, become the children of each node.
     /// Binary leaves of more than `max_leaf` primitives are split into

@@ -324,7 +324,7 @@ pub struct SetRequest {
 
 /// The sets of `requests` (the four numbers that [`Sampler::set_of_four`]
 /// gives for each), sixteen at a time side by side: the integer
-/// operations of [`sobol_set`] lane by lane, so the same bits (tested on
+/// operations of `sobol_set` lane by lane, so the same bits (tested on
 /// every SIMD path). For a stage that has many paths' draws at hand (the
 /// wavefront's shading): one call costs a fraction of a set drawn alone,
 /// whose index shuffle is scalar and whose dimensions fill one 4-lane

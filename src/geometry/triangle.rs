@@ -1353,7 +1353,7 @@ impl PermutedLanes16 {
     /// test passed or needs the re-check, with the edge functions and
     /// their rounding bounds, lane by lane exactly the operations of
     /// [`WatertightRay::intersect8`] (so the same bits; the caller
-    /// finishes those lanes with [`WatertightRay::finish_lane`]). With
+    /// finishes those lanes with `WatertightRay::finish_lane`). With
     /// `AVX512` (only inside an AVX-512 entry point, see
     /// [`crate::core::simd`]) in 16-wide registers; otherwise plain loops
     /// over the lanes, which the AVX2 entry points compile to 8-wide ones.

@@ -1,6 +1,6 @@
 //! Closest hits and occlusion of many rays at once against every
 //! triangle of a scene that is one small merged mesh (the glTF Cornell
-//! box: 38 triangles, see [`crate::scene::merged`]), for the wavefront,
+//! box: 38 triangles, see `crate::scene::merged`), for the wavefront,
 //! which has the rays of a whole bounce, and many hits' shadow rays, at
 //! hand.
 //!
@@ -34,7 +34,7 @@
 //! 1.8x slower).
 //!
 //! The triangles of each BVH leaf are kept together with their joint box
-//! ([`Cluster`]), tested first for the whole group: on the Cornell box
+//! (`Cluster`), tested first for the whole group: on the Cornell box
 //! its nine leaves are the five walls, the ceiling with the light, and the
 //! two blocks in two leaves each, so most lanes skip the blocks' 22
 //! triangles at once. One thread, 8 spp, alternating pinned runs with the
