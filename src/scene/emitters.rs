@@ -70,11 +70,6 @@ enum EntryGeometry {
 struct Entry {
     instance: u32,
     geometry: EntryGeometry,
-    /// For a triangle or parallelogram whose material's emission is not
-    /// textured: that emission and the instance's density per unit area,
-    /// which [`EmitterTable::sample`] then reads here instead of from the
-    /// instance and its material (the same values).
-    fixed: Option<(Color, f32)>,
 }
 
 /// How an instance's points are weighted, to answer density queries.
@@ -177,7 +172,6 @@ impl EmitterTable {
                         entries.push(Entry {
                             instance: i as u32,
                             geometry: EntryGeometry::Sphere { radius: *radius },
-                            fixed: None,
                         });
                         power.push(area * weight);
                     }
@@ -192,7 +186,6 @@ impl EmitterTable {
                                 radius: *radius,
                                 world_area,
                             },
-                            fixed: None,
                         });
                         power.push(world_area * weight);
                     }
@@ -218,7 +211,6 @@ impl EmitterTable {
                                 e2,
                                 normal: cross / area,
                             },
-                            fixed: None,
                         });
                         power.push(area * weight);
                         k += 2;
@@ -238,7 +230,6 @@ impl EmitterTable {
                             normal: cross / (2.0 * area),
                             triangle,
                         },
-                        fixed: None,
                     });
                     power.push(area * weight);
                 }
@@ -285,18 +276,6 @@ impl EmitterTable {
                 _ => InstanceDensity::Uniform((weight as f64 / total) as f32),
             };
         }
-        for e in &mut entries {
-            let m = &materials[instances[e.instance as usize].material as usize];
-            let plain = m.emission_texture.is_none().then_some(m.emission);
-            if let (
-                EntryGeometry::Triangle { .. } | EntryGeometry::Parallelogram { .. },
-                Some(radiance),
-                InstanceDensity::Uniform(p),
-            ) = (&e.geometry, plain, density[e.instance as usize])
-            {
-                e.fixed = Some((radiance, p));
-            }
-        }
         Self {
             entries,
             cdf,
@@ -340,25 +319,6 @@ impl EmitterTable {
             .partition_point(|&c| c <= u)
             .min(self.entries.len() - 1);
         let entry = &self.entries[k];
-        if let Some((radiance, pdf_area)) = entry.fixed {
-            // `material.emission_at` and `pdf_area` would give these.
-            let (point, normal) = match entry.geometry {
-                EntryGeometry::Triangle {
-                    p0, e1, e2, normal, ..
-                } => (folded_point(p0, e1, e2, v).0, normal),
-                EntryGeometry::Parallelogram { p0, e1, e2, normal } => {
-                    (p0 + e1 * v.x + e2 * v.y, normal)
-                }
-                _ => unreachable!("only triangles and parallelograms are fixed"),
-            };
-            return (pdf_area > 0.0 && radiance.max_element() > 0.0 && point.is_finite())
-                .then_some(EmitterSample {
-                    point,
-                    normal,
-                    radiance,
-                    pdf_area,
-                });
-        }
         let inst = &instances[entry.instance as usize];
         let material = &materials[inst.material as usize];
         let xf = &inst.transform;
@@ -371,7 +331,13 @@ impl EmitterTable {
                 triangle,
                 ..
             } => {
-                let (point, b1, b2) = folded_point(p0, e1, e2, v);
+                // Uniform barycentrics by folding the unit square.
+                let (mut b1, mut b2) = (v.x, v.y);
+                if b1 + b2 > 1.0 {
+                    b1 = 1.0 - b1;
+                    b2 = 1.0 - b2;
+                }
+                let point = p0 + e1 * b1 + e2 * b2;
                 let uv = if material.emission_texture.is_none() {
                     Vec2::ZERO
                 } else {
@@ -439,18 +405,6 @@ impl EmitterTable {
             }
         }
     }
-}
-
-/// The point of the triangle `p0 + b1 e1 + b2 e2` at uniform barycentrics
-/// `(b1, b2)` made by folding the unit square point `v`, with them.
-#[inline(always)]
-fn folded_point(p0: Vec3A, e1: Vec3A, e2: Vec3A, v: Vec2) -> (Vec3A, f32, f32) {
-    let (mut b1, mut b2) = (v.x, v.y);
-    if b1 + b2 > 1.0 {
-        b1 = 1.0 - b1;
-        b2 = 1.0 - b2;
-    }
-    (p0 + e1 * b1 + e2 * b2, b1, b2)
 }
 
 /// The parallelogram `(p0, e1, e2)` that triangles `a` and `b` make
