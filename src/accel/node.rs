@@ -234,6 +234,25 @@ impl NodeRay {
         self.test::<AVX>(node, t_min, t_max)
     }
 
+    /// [`Self::test_fused`] for a ray whose [`Self::fused`] is set: the
+    /// fused form without checking the flag at every node.
+    #[inline(always)]
+    pub fn test_fma_known<const AVX: bool>(
+        &self,
+        node: &Node8,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
+        debug_assert!(self.fused);
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: as in `test_fused`.
+            #[allow(unsafe_code)]
+            return unsafe { self.test_fma(node, t_min, t_max) };
+        }
+        self.test::<AVX>(node, t_min, t_max)
+    }
+
     /// [`Self::test_fused`]'s fused form in one 8-wide AVX register.
     ///
     /// # Safety

@@ -121,6 +121,27 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     start: u32,
     ray: &NodeRay,
     t_min: f32,
+    t_max: f32,
+    any_hit: bool,
+    visit: impl FnMut(u32, f32) -> Option<f32>,
+    prefetch_leaf: impl Fn(u32),
+) -> bool {
+    if FUSED && AVX && ray.fused {
+        walk::<AVX, true>(bvh, start, ray, t_min, t_max, any_hit, visit, prefetch_leaf)
+    } else {
+        walk::<AVX, false>(bvh, start, ray, t_min, t_max, any_hit, visit, prefetch_leaf)
+    }
+}
+
+/// [`traverse_from_with`]'s loop; with `FMA`, every node is tested in the
+/// fused form ([`NodeRay::test_fma_known`]: the ray allows it).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn walk<const AVX: bool, const FMA: bool>(
+    bvh: &Bvh8,
+    start: u32,
+    ray: &NodeRay,
+    t_min: f32,
     mut t_max: f32,
     any_hit: bool,
     mut visit: impl FnMut(u32, f32) -> Option<f32>,
@@ -145,8 +166,8 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     loop {
         if cur & LEAF == 0 {
             let node = &bvh.nodes[cur as usize];
-            let (mask, enter) = if FUSED {
-                ray.test_fused::<AVX>(node, t_min, t_max)
+            let (mask, enter) = if FMA {
+                ray.test_fma_known::<AVX>(node, t_min, t_max)
             } else {
                 ray.test::<AVX>(node, t_min, t_max)
             };
