@@ -706,6 +706,7 @@ mod tests {
             .map(|(s, &set)| s.sampler().set_of_four(4 * set).map(f32::to_bits))
             .collect();
         type Path = fn(&[SetRequest], &mut [[f32; 4]]);
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
         let mut paths: Vec<(&str, Path)> = vec![("portable", sobol_sets_with)];
         #[cfg(target_arch = "x86_64")]
         {

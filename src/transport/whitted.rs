@@ -425,7 +425,9 @@ mod tests {
             state as f32 / u32::MAX as f32 * 2.0 - 1.0
         };
         let mut v = |scale: f32| Vec3A::new(next(), next(), next()) * scale;
-        let (mut lit, mut glossy, mut avx2_checked) = (0, 0, 0);
+        let (mut lit, mut glossy) = (0, 0);
+        #[cfg(target_arch = "x86_64")]
+        let mut avx2_checked = 0;
         for round in 0..4000 {
             let position = v(3.0);
             let intensity = Color::new(2.0, 1.0, 0.5) * (1.0 + round as f32 % 7.0);
