@@ -96,6 +96,22 @@ impl RayCone {
     }
 }
 
+/// The cross product `a x b` with both products of each component rounded
+/// before their difference: the bits of glam's `Vec3A::cross` on x86-64
+/// (SSE2) and of its scalar fallback. On aarch64 glam's `cross` fuses the
+/// second product into the difference (NEON `vfmsq_f32`), so its last
+/// bits differ there; code whose result another code path reproduces lane
+/// by lane (the polygon edge test and the wavefront's batched polygons)
+/// uses this one, and the two agree on every target.
+#[inline(always)]
+pub fn cross_rounded(a: Vec3A, b: Vec3A) -> Vec3A {
+    Vec3A::new(
+        a.y * b.z - a.z * b.y,
+        a.z * b.x - a.x * b.z,
+        a.x * b.y - a.y * b.x,
+    )
+}
+
 /// Builds an orthonormal basis `(t, b)` around the unit vector `n`
 /// (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
 #[inline]
@@ -204,6 +220,47 @@ pub fn fast_tan(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `cross_rounded` rounds each product before the difference (checked
+    /// against products taken exactly in f64 and rounded to f32, which a
+    /// fused multiply-subtract would not match), and on x86-64 it is glam's
+    /// `cross` bit for bit, so the per-ray polygon test kept its bits when
+    /// it took it up.
+    #[test]
+    fn cross_rounded_rounds_each_product() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            // Mantissas with many bits set, magnitudes from 1e-3 to 1e3.
+            let m = (s >> 40) as f32 / (1u64 << 24) as f32 + 0.5;
+            let e = ((s >> 8) % 21) as i32 - 10;
+            let sign = if s & 1 == 0 { 1.0 } else { -1.0 };
+            sign * m * 2f32.powi(e)
+        };
+        let round = |p: f32, q: f32| (p as f64 * q as f64) as f32;
+        let mut fused_would_differ = 0;
+        for _ in 0..20_000 {
+            let a = Vec3A::new(next(), next(), next());
+            let b = Vec3A::new(next(), next(), next());
+            let c = cross_rounded(a, b);
+            let want = [
+                round(a.y, b.z) - round(a.z, b.y),
+                round(a.z, b.x) - round(a.x, b.z),
+                round(a.x, b.y) - round(a.y, b.x),
+            ];
+            assert_eq!(c.to_array().map(f32::to_bits), want.map(f32::to_bits));
+            fused_would_differ += ((-a.z).mul_add(b.y, round(a.y, b.z)) != c.x) as u32;
+            #[cfg(target_arch = "x86_64")]
+            assert_eq!(
+                a.cross(b).to_array().map(f32::to_bits),
+                c.to_array().map(f32::to_bits)
+            );
+        }
+        // The check can tell: a fused difference changes many of them.
+        assert!(fused_would_differ > 1000, "{fused_would_differ}");
+    }
 
     /// `fast_atan2` against `f64::atan2` over every quadrant, on a dense
     /// grid of angles and magnitudes from `1e-30` to `1e30`: within

@@ -256,7 +256,8 @@ impl PolygonBatch {
             let [ax, ay, az] = a.to_array();
             let [ex, ey, ez] = e.to_array();
             for l in 0..BATCH_LANES {
-                // (b - a).cross(p - a).dot(n), as glam computes it.
+                // `cross_rounded(b - a, p - a).dot(n)`, as the per-ray
+                // test computes it.
                 let (wx, wy, wz) = (pt[0][l] - ax, pt[1][l] - ay, pt[2][l] - az);
                 let cx = ey * wz - ez * wy;
                 let cy = ez * wx - ex * wz;

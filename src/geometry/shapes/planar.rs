@@ -4,7 +4,7 @@
 use glam::{Vec2, Vec3, Vec3A};
 
 use super::ShapeHit;
-use crate::core::math::Ray;
+use crate::core::math::{Ray, cross_rounded};
 
 /// Newell normal of a polygon (unnormalised; length is twice the area).
 pub fn polygon_normal(vertices: &[Vec3]) -> Vec3 {
@@ -169,7 +169,9 @@ pub(super) fn intersect_polygon(
     for (i, a) in vertices.iter().enumerate() {
         let a = Vec3A::from(*a);
         let b = Vec3A::from(vertices[(i + 1) % vertices.len()]);
-        if (b - a).cross(p - a).dot(n) < 0.0 {
+        // (`cross_rounded`: the batched polygons repeat this test lane by
+        // lane, and glam's `cross` rounds differently on aarch64.)
+        if cross_rounded(b - a, p - a).dot(n) < 0.0 {
             return None;
         }
     }
