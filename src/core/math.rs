@@ -112,6 +112,18 @@ pub fn cross_rounded(a: Vec3A, b: Vec3A) -> Vec3A {
     )
 }
 
+/// `v` over its length `sqrt((x x + y y) + z z)`, each coordinate divided
+/// by it: the bits of glam's `Vec3A::normalize` on x86-64 (SSE2). On
+/// aarch64 glam multiplies by the reciprocal of the length instead, which
+/// rounds differently; code whose result another code path reproduces
+/// lane by lane (a camera's rays, one at a time and a row at a time) uses
+/// this one, and the two agree on every target.
+#[inline(always)]
+pub fn unit_rounded(v: Vec3A) -> Vec3A {
+    let len = ((v.x * v.x + v.y * v.y) + v.z * v.z).sqrt();
+    Vec3A::new(v.x / len, v.y / len, v.z / len)
+}
+
 /// Builds an orthonormal basis `(t, b)` around the unit vector `n`
 /// (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
 #[inline]
@@ -260,6 +272,40 @@ mod tests {
         }
         // The check can tell: a fused difference changes many of them.
         assert!(fused_would_differ > 1000, "{fused_would_differ}");
+    }
+
+    /// `unit_rounded` divides by the length taken as `sqrt((x x + y y) +
+    /// z z)` (checked against that expression written out, which a
+    /// multiplication by the reciprocal would not match), and on x86-64 it
+    /// is glam's `normalize` bit for bit, so a camera's rays kept their
+    /// bits when they took it up.
+    #[test]
+    fn unit_rounded_divides_by_the_length() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            ((s >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 2f32.powi((s % 13) as i32 - 6)
+        };
+        let mut reciprocal_would_differ = 0;
+        for _ in 0..20_000 {
+            let v = Vec3A::new(next(), next(), next());
+            if v == Vec3A::ZERO {
+                continue;
+            }
+            let u = unit_rounded(v);
+            let len = ((v.x * v.x + v.y * v.y) + v.z * v.z).sqrt();
+            let want = [v.x / len, v.y / len, v.z / len];
+            assert_eq!(u.to_array().map(f32::to_bits), want.map(f32::to_bits));
+            reciprocal_would_differ += (v.x * (1.0 / len) != u.x) as u32;
+            #[cfg(target_arch = "x86_64")]
+            assert_eq!(
+                v.normalize().to_array().map(f32::to_bits),
+                u.to_array().map(f32::to_bits)
+            );
+        }
+        assert!(reciprocal_would_differ > 1000, "{reciprocal_would_differ}");
     }
 
     /// `fast_atan2` against `f64::atan2` over every quadrant, on a dense

@@ -301,7 +301,9 @@ impl CameraRays {
         }
         let d = self.top_left + self.dx * p.x + self.dy * p.y;
         match self.ortho_forward {
-            None => Ray::new(self.origin, d.normalize()),
+            // (`unit_rounded`: `pixel_centre_row` repeats this across
+            // lanes, and glam's `normalize` rounds differently on aarch64.)
+            None => Ray::new(self.origin, crate::core::math::unit_rounded(d)),
             Some(forward) => Ray::new(self.origin + d, forward),
         }
     }
