@@ -8,15 +8,24 @@ figure of each side over all the files (rounds), and prints per workload
 and thread count: camera rays, Prism's best mode against Embree's best
 mode; bounce rays, Prism's best mode against Embree's `rtcIntersect1` on
 its medium build; build time against Embree's medium build.
+
+Then the same ratios round by round (`embree.R.txt` against
+`prism-SIZE.R.txt` of the same round R, run minutes apart) with their
+median and range: on a VM whose speed drifts, a ratio of two bests can
+pair one side's fast minute with the other's slow one, and the paired
+rounds show how far a cell moves from round to round.
 """
 import glob
 import re
+import statistics
 import sys
 
 
-def main(out):
+def ratios(emb_paths, prism_paths):
+    """The bars' ratios, per (size, threads), from the best figures in
+    the given files: {(size, t): (camera, best_key, bounces, build, line)}."""
     emb = {}
-    for path in sorted(glob.glob(out + "/embree*.txt")):
+    for path in emb_paths:
         for line in open(path):
             if not line.startswith("DETAIL"):
                 continue
@@ -29,9 +38,10 @@ def main(out):
             key = (f[1], f[2], f[3], f[4], int(f[5].split("=")[1]))
             rate = float(f[6].split("=")[1])
             emb[key] = max(emb.get(key, rate), rate)
+    out = {}
     for size in ["100k", "1m"]:
         rates, builds = {}, {}
-        for path in sorted(glob.glob(f"{out}/prism-{size}*.txt")):
+        for path in prism_paths(size):
             for line in open(path):
                 m = re.match(r"\s+(primary|incoherent)\s+(\w+)\s+(\d+)\s+([\d.]+)", line)
                 if m:
@@ -50,12 +60,41 @@ def main(out):
             e_build = emb[(size, "embree3-medium", "build", t)]
             p_cam = max(v for k, v in rates.items() if k[0] == "primary" and k[2] == t)
             p_inc = max(v for k, v in rates.items() if k[0] == "incoherent" and k[2] == t)
-            print(
+            line = (
                 f"{size} {t} thread(s): camera {p_cam:.2f} / {e_cam:.2f} "
                 f"({best_key[1]} {best_key[2]}) = {p_cam / e_cam:.2f}x (0.5x needed); "
                 f"bounces {p_inc:.2f} / {e_one:.2f} = {p_inc / e_one:.2f}x (0.8x needed); "
                 f"build {builds[t]:.1f} / {e_build:.1f} ms = {builds[t] / e_build:.2f}x (2x allowed)"
             )
+            out[(size, t)] = (p_cam / e_cam, p_inc / e_one, builds[t] / e_build, line)
+    return out
+
+
+def main(out):
+    best = ratios(
+        sorted(glob.glob(out + "/embree*.txt")),
+        lambda size: sorted(glob.glob(f"{out}/prism-{size}*.txt")),
+    )
+    for key in sorted(best):
+        print(best[key][3])
+    rounds = sorted(
+        int(m.group(1))
+        for p in glob.glob(out + "/embree.*.txt")
+        if (m := re.search(r"embree\.(\d+)\.txt$", p))
+    )
+    if len(rounds) < 2:
+        return
+    per = [
+        ratios([f"{out}/embree.{r}.txt"], lambda size, r=r: [f"{out}/prism-{size}.{r}.txt"])
+        for r in rounds
+    ]
+    print(f"paired rounds ({len(rounds)}): median [min, max] of each round's ratio")
+    for key in sorted(best):
+        cells = []
+        for i, (name, bar) in enumerate([("camera", "0.5x"), ("bounces", "0.8x"), ("build", "2x")]):
+            v = sorted(p[key][i] for p in per)
+            cells.append(f"{name} {statistics.median(v):.2f}x [{v[0]:.2f}, {v[-1]:.2f}] ({bar})")
+        print(f"{key[0]} {key[1]} thread(s): " + "; ".join(cells))
 
 
 if __name__ == "__main__":
