@@ -9,8 +9,8 @@
 # OUT_DIR/prism-100k.R.txt and prism-1m.R.txt for each round R,
 # OUT_DIR/uptime.txt (load before and after), and prints the ratios of
 # issue 12's bars from the best figure of each side over the rounds, then
-# round by round with their median and range (anchors_ratio.py). About a minute a round on 2 cores once the workload
-# and harness exist.
+# round by round with their median and range (anchors_ratio.py). About a
+# minute a round on 2 cores once the workload and harness exist.
 set -euo pipefail
 if [ $# -lt 2 ]; then
   echo "usage: $0 PRISM_BINARY OUT_DIR [SHARED_DIR]" >&2

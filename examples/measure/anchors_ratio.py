@@ -22,8 +22,9 @@ import sys
 
 
 def ratios(emb_paths, prism_paths):
-    """The bars' ratios, per (size, threads), from the best figures in
-    the given files: {(size, t): (camera, best_key, bounces, build, line)}."""
+    """The bars' ratios from the best figures in the given files: for
+    each (size, threads), (camera ratio, bounce ratio, build ratio, the
+    line that prints them with their figures)."""
     emb = {}
     for path in emb_paths:
         for line in open(path):
