@@ -17,7 +17,7 @@ use std::mem::MaybeUninit;
 
 use glam::{Vec3A, Vec4};
 
-use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH, leaf_index};
 use crate::accel::frustum::Frustum;
 use crate::accel::node::{NodeRay, max4, min_keep, min4};
 use crate::accel::single::traverse_from;
@@ -220,7 +220,7 @@ pub fn traverse<const AVX: bool, const FRUSTUM: bool>(
             continue;
         }
         if cur & LEAF != 0 {
-            alive &= !leaf(packet, go, cur & !LEAF);
+            alive &= !leaf(packet, go, leaf_index(cur));
             if alive == 0 {
                 return;
             }

@@ -28,7 +28,7 @@
 
 use std::mem::MaybeUninit;
 
-use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH, leaf_index};
 use crate::accel::frustum::{Frustum, masked_max};
 use crate::accel::node::{NodeRay, max_keep, min_keep};
 use crate::accel::packet::{LaneMask, PacketOf, for_each_lane};
@@ -198,7 +198,7 @@ pub fn traverse16<const AVX: bool, const AVX512: bool>(
             continue;
         }
         if cur & LEAF != 0 {
-            alive &= !leaf(packet, go, cur & !LEAF);
+            alive &= !leaf(packet, go, leaf_index(cur));
             if alive == 0 {
                 return;
             }

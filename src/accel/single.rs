@@ -4,70 +4,88 @@
 
 use std::mem::MaybeUninit;
 
-use crate::accel::bvh8::{Bvh8, LEAF};
+use crate::accel::bvh8::{Bvh8, LEAF, WIDTH, leaf_count, leaf_index};
 use crate::accel::node::NodeRay;
 use crate::core::math::Ray;
 
-/// Entries held without allocating; deeper traversals spill to the heap.
-const FIXED: usize = 32;
+/// Entries held in the traversal's own frame (2 KiB): enough for trees
+/// of up to 36 levels; deeper ones (large or degenerate input, see the
+/// deep-tree test in `geometry::mesh`) get a heap buffer of their own.
+const FIXED: usize = 256;
 
-/// Pending subtrees: `entry distance bits << 32 | child reference`.
+/// Pending subtrees: `entry distance bits << 32 | child reference`, in a
+/// buffer of a power-of-two length at least `7 * depth + 1` (a node
+/// stacks at most seven children, and only the nodes on the path from the
+/// root have entries waiting), so pushes and pops need no bounds check
+/// and no test for a full buffer: the index is masked. A tree whose
+/// `depth` understates its levels would wrap around and lose subtrees,
+/// never read outside the buffer or an unwritten entry (every slot below
+/// `len` was written when `len` last passed it).
 ///
-/// At most seven entries per level are pending, and nearest-first
-/// traversal rarely holds more than a few; deeper stacks (large or
-/// degenerate input, see the deep-tree test in `geometry::mesh`) spill to
-/// a `Vec`, which allocates only when first pushed to. The fixed part is
-/// left uninitialised: zeroing its 256 bytes cost about 80 instructions
-/// per traversal, a tenth of all the instructions of a frame of the
-/// frame-loop benchmark (callgrind), and only written entries are read.
-pub(crate) struct Stack {
-    fixed: [MaybeUninit<u64>; FIXED],
+/// The buffer is left uninitialised: zeroing it cost about 80
+/// instructions per traversal, a tenth of all the instructions of a frame
+/// of the frame-loop benchmark (callgrind), and only written entries are
+/// read. The earlier stack (a fixed part with a spill `Vec`) kept its
+/// length in memory and tested for the spill at every pop: about 15
+/// instructions per ray on the anchors' bounce rays (callgrind).
+pub(crate) struct Stack<'a> {
+    buf: &'a mut [MaybeUninit<u64>],
+    mask: usize,
     len: usize,
-    spill: Vec<u64>,
 }
 
-impl Stack {
+impl<'a> Stack<'a> {
+    /// A stack over `buf`, whose length is a power of two.
     #[inline(always)]
-    pub(crate) fn new() -> Self {
-        Self {
-            fixed: [const { MaybeUninit::uninit() }; FIXED],
-            len: 0,
-            spill: Vec::new(),
-        }
+    pub(crate) fn new(buf: &'a mut [MaybeUninit<u64>]) -> Self {
+        assert!(buf.len().is_power_of_two());
+        let mask = buf.len() - 1;
+        Self { buf, mask, len: 0 }
     }
 
-    /// The fixed part changes only while the spill is empty, so entries
-    /// come back last in, first out.
     #[inline(always)]
     pub(crate) fn push(&mut self, v: u64) {
-        if self.len < FIXED {
-            self.fixed[self.len].write(v);
-            self.len += 1;
-        } else {
-            self.push_spill(v);
-        }
-    }
-
-    #[cold]
-    #[inline(never)]
-    fn push_spill(&mut self, v: u64) {
-        self.spill.push(v);
+        // SAFETY: `len & mask` is below `buf.len()`, a power of two.
+        #[allow(unsafe_code)]
+        unsafe { self.buf.get_unchecked_mut(self.len & self.mask) }.write(v);
+        self.len += 1;
     }
 
     #[inline(always)]
     pub(crate) fn pop(&mut self) -> Option<u64> {
-        if !self.spill.is_empty() {
-            return self.spill.pop();
-        }
         if self.len == 0 {
             return None;
         }
         self.len -= 1;
-        // SAFETY: entries below `len` were written by `push` (`len` only
-        // grows there, one written entry at a time).
+        // SAFETY: in bounds as in `push`; the slot was written when `len`
+        // last went from this value up (it starts at 0 and moves by one).
         #[allow(unsafe_code)]
-        Some(unsafe { self.fixed[self.len].assume_init() })
+        Some(unsafe { self.buf.get_unchecked(self.len & self.mask).assume_init() })
     }
+}
+
+/// Runs `f` with a stack big enough for `bvh` (see [`Stack`]): one call
+/// whichever buffer it gets, so that the traversal loop is compiled once
+/// (a call per buffer doubled the crate's build time).
+#[inline(always)]
+fn with_stack<R>(bvh: &Bvh8, f: impl FnOnce(Stack<'_>) -> R) -> R {
+    let need = (WIDTH - 1) * bvh.depth + 1;
+    let mut fixed = [const { MaybeUninit::<u64>::uninit() }; FIXED];
+    let mut heap = Vec::new();
+    let buf: &mut [MaybeUninit<u64>] = if need <= FIXED {
+        &mut fixed
+    } else {
+        heap.resize(need.next_power_of_two(), MaybeUninit::uninit());
+        &mut heap
+    };
+    f(Stack::new(buf))
+}
+
+/// `bits` of an `f32` as an unsigned integer that orders as the float
+/// does (for everything but NaN, and `-0.0` just below `0.0`).
+#[inline(always)]
+fn sortable(bits: u32) -> u32 {
+    bits ^ ((((bits as i32) >> 31) as u32) | 0x8000_0000)
 }
 
 /// A stack entry.
@@ -103,12 +121,24 @@ pub fn traverse_from<const AVX: bool>(
     t_min: f32,
     t_max: f32,
     any_hit: bool,
-    visit: impl FnMut(u32, f32) -> Option<f32>,
+    mut visit: impl FnMut(u32, f32) -> Option<f32>,
 ) -> bool {
-    traverse_from_with::<AVX, false>(bvh, start, ray, t_min, t_max, any_hit, visit, |_| {})
+    traverse_from_with::<AVX, false>(
+        bvh,
+        start,
+        ray,
+        t_min,
+        t_max,
+        any_hit,
+        #[inline(always)]
+        |leaf, _, t_max| visit(leaf, t_max),
+        |_| {},
+    )
 }
 
-/// [`traverse_from`] with `prefetch_leaf(leaf)`, called for a leaf that
+/// [`traverse_from`] with `visit(leaf, count, t_max)` told the number of
+/// primitives in the leaf (from its reference, without reading
+/// [`Bvh8::leaves`]), and `prefetch_leaf(leaf)`, called for a leaf that
 /// will be visited soon (it was entered beside a sibling), to start
 /// loading what its visit reads. Nodes entered beside a sibling are
 /// prefetched the same way. With `FUSED` the nodes are tested with
@@ -123,14 +153,43 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     t_min: f32,
     t_max: f32,
     any_hit: bool,
-    visit: impl FnMut(u32, f32) -> Option<f32>,
+    visit: impl FnMut(u32, u32, f32) -> Option<f32>,
     prefetch_leaf: impl Fn(u32),
 ) -> bool {
-    if FUSED && AVX && ray.fused {
-        walk::<AVX, true>(bvh, start, ray, t_min, t_max, any_hit, visit, prefetch_leaf)
-    } else {
-        walk::<AVX, false>(bvh, start, ray, t_min, t_max, any_hit, visit, prefetch_leaf)
+    if bvh.nodes.is_empty() {
+        return false;
     }
+    with_stack(
+        bvh,
+        #[inline(always)]
+        |stack| {
+            if FUSED && AVX && ray.fused {
+                walk::<AVX, true>(
+                    bvh,
+                    stack,
+                    start,
+                    ray,
+                    t_min,
+                    t_max,
+                    any_hit,
+                    visit,
+                    prefetch_leaf,
+                )
+            } else {
+                walk::<AVX, false>(
+                    bvh,
+                    stack,
+                    start,
+                    ray,
+                    t_min,
+                    t_max,
+                    any_hit,
+                    visit,
+                    prefetch_leaf,
+                )
+            }
+        },
+    )
 }
 
 /// [`traverse_from_with`]'s loop; with `FMA`, every node is tested in the
@@ -139,12 +198,13 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
 #[allow(clippy::too_many_arguments)]
 fn walk<const AVX: bool, const FMA: bool>(
     bvh: &Bvh8,
+    mut stack: Stack<'_>,
     start: u32,
     ray: &NodeRay,
     t_min: f32,
     mut t_max: f32,
     any_hit: bool,
-    mut visit: impl FnMut(u32, f32) -> Option<f32>,
+    mut visit: impl FnMut(u32, u32, f32) -> Option<f32>,
     prefetch_leaf: impl Fn(u32),
 ) -> bool {
     let prefetch = |r: u32| {
@@ -154,13 +214,9 @@ fn walk<const AVX: bool, const FMA: bool>(
                 std::mem::size_of::<crate::accel::bvh8::Node8>(),
             );
         } else {
-            prefetch_leaf(r & !LEAF);
+            prefetch_leaf(leaf_index(r));
         }
     };
-    if bvh.nodes.is_empty() {
-        return false;
-    }
-    let mut stack = Stack::new();
     let mut any = false;
     let mut cur = start;
     loop {
@@ -175,15 +231,18 @@ fn walk<const AVX: bool, const FMA: bool>(
                 let first = mask.trailing_zeros() as usize;
                 let rest = mask & (mask - 1);
                 if rest == 0 {
-                    cur = node.child[first];
+                    cur = node.child[first & (WIDTH - 1)];
                     continue;
                 }
                 let second = rest.trailing_zeros() as usize;
                 if rest & (rest - 1) == 0 {
                     // Two children: the farther one waits.
                     let (a, b) = (
-                        (enter[first], node.child[first]),
-                        (enter[second], node.child[second]),
+                        (enter[first & (WIDTH - 1)], node.child[first & (WIDTH - 1)]),
+                        (
+                            enter[second & (WIDTH - 1)],
+                            node.child[second & (WIDTH - 1)],
+                        ),
                     );
                     let (near, far) = if b.0 < a.0 { (b, a) } else { (a, b) };
                     if PREFETCH {
@@ -194,33 +253,39 @@ fn walk<const AVX: bool, const FMA: bool>(
                     cur = near.1;
                     continue;
                 }
-                // Three or more: sort far to near (insertion sort of at
-                // most eight), stack all but the nearest.
-                let mut buf = [(0.0f32, 0u32); 8];
+                // Three or more: sorted far to near by an insertion sort
+                // of at most eight integer keys (the entry distance as an
+                // integer of the same order, then the slot, so that equal
+                // distances keep the slots' order), all but the nearest
+                // stacked.
+                let bits: [u32; WIDTH] = enter.map(f32::to_bits);
+                let mut keys = [0u64; WIDTH];
                 let mut n = 0;
                 let mut m = mask;
                 while m != 0 {
-                    let c = m.trailing_zeros() as usize;
+                    let c = m.trailing_zeros() as usize & (WIDTH - 1);
                     m &= m - 1;
-                    let item = (enter[c], node.child[c]);
                     if PREFETCH {
-                        prefetch(item.1);
+                        prefetch(node.child[c]);
                     }
+                    let key = (sortable(bits[c]) as u64) << 32 | (WIDTH - 1 - c) as u64;
                     let mut j = n;
-                    while j > 0 && buf[j - 1].0 < item.0 {
-                        buf[j] = buf[j - 1];
+                    while j > 0 && keys[j - 1] < key {
+                        keys[j] = keys[j - 1];
                         j -= 1;
                     }
-                    buf[j] = item;
+                    keys[j] = key;
                     n += 1;
                 }
-                for &(t, c) in &buf[..n - 1] {
-                    stack.push(entry(t, c));
+                let slot = |k: u64| (WIDTH - 1) - (k as usize & (WIDTH - 1));
+                for &k in &keys[..n - 1] {
+                    let c = slot(k);
+                    stack.push((bits[c] as u64) << 32 | node.child[c] as u64);
                 }
-                cur = buf[n - 1].1;
+                cur = node.child[slot(keys[(n - 1) & (WIDTH - 1)])];
                 continue;
             }
-        } else if let Some(t) = visit(cur & !LEAF, t_max) {
+        } else if let Some(t) = visit(leaf_index(cur), leaf_count(cur), t_max) {
             any = true;
             if any_hit {
                 return true;
@@ -318,7 +383,7 @@ pub fn traverse<const AVX: bool>(
     traverse_from::<AVX>(bvh, 0, &node_ray, t_min, t_max, any_hit, visit)
 }
 
-/// [`traverse`] with [`traverse_from_with`]'s leaf prefetch, and nodes
+/// [`traverse`] with [`traverse_from_with`]'s leaf count and prefetch, and nodes
 /// tested with [`NodeRay::test_fused`]: for mesh BVHs, whose closest hit
 /// does not depend on the order of the leaves (equal `t` goes to the
 /// lowest triangle index) and whose any-hit answer does not either.
@@ -329,7 +394,7 @@ pub fn traverse_with<const AVX: bool>(
     t_min: f32,
     t_max: f32,
     any_hit: bool,
-    visit: impl FnMut(u32, f32) -> Option<f32>,
+    visit: impl FnMut(u32, u32, f32) -> Option<f32>,
     prefetch_leaf: impl Fn(u32),
 ) -> bool {
     let node_ray = NodeRay::new(ray, bvh);
@@ -423,19 +488,21 @@ mod tests {
         assert!(order.is_empty());
     }
 
-    /// The stack gives back every entry, last in first out, past its
-    /// fixed part.
+    /// The stack gives back every entry, last in first out, up to its
+    /// capacity; past it, it wraps around (keeping the latest entries)
+    /// instead of reading or writing outside its buffer.
     #[test]
-    fn stack_keeps_every_entry() {
-        let mut s = Stack::new();
-        for i in 0..200u32 {
+    fn stack_keeps_every_entry_up_to_its_capacity() {
+        let mut buf = [MaybeUninit::uninit(); 256];
+        let mut s = Stack::new(&mut buf);
+        for i in 0..256u32 {
             s.push(entry(i as f32, i));
         }
-        for i in (0..200u32).rev() {
+        for i in (0..256u32).rev() {
             assert_eq!(unpack(s.pop().unwrap()), (i as f32, i));
         }
         assert!(s.pop().is_none());
-        // Interleaved pushes and pops across the boundary.
+        // Interleaved pushes and pops.
         for i in 0..70u32 {
             s.push(entry(0.0, i));
         }
@@ -444,6 +511,59 @@ mod tests {
         assert_eq!(unpack(s.pop().unwrap()).1, 1000);
         for i in (0..69u32).rev() {
             assert_eq!(unpack(s.pop().unwrap()).1, i);
+        }
+        assert!(s.pop().is_none());
+        // Past the capacity: the last eight of twelve come back, then the
+        // wrapped slots again, never anything unwritten.
+        let mut buf = [MaybeUninit::uninit(); 8];
+        let mut s = Stack::new(&mut buf);
+        for i in 0..12u32 {
+            s.push(entry(0.0, i));
+        }
+        let got: Vec<u32> = std::iter::from_fn(|| s.pop())
+            .map(|e| unpack(e).1)
+            .collect();
+        assert_eq!(got, [11, 10, 9, 8, 7, 6, 5, 4, 11, 10, 9, 8]);
+    }
+
+    /// A stack is as large as the tree needs: seven entries per level.
+    #[test]
+    fn stack_buffer_covers_the_depth() {
+        for depth in [0, 1, 36, 37, 100] {
+            let bvh = Bvh8 {
+                depth,
+                ..Bvh8::default()
+            };
+            let cap = with_stack(&bvh, |s| s.buf.len());
+            assert!(
+                cap >= 7 * depth + 1 && cap.is_power_of_two(),
+                "{depth}: {cap}"
+            );
+        }
+    }
+
+    /// The integer keys of the three-or-more sort order as the floats do.
+    #[test]
+    fn sortable_keys_order_as_floats() {
+        let v = [
+            f32::NEG_INFINITY,
+            -3.5,
+            -1.0e-30,
+            -0.0,
+            0.0,
+            1.0e-40,
+            0.25,
+            7.0,
+            f32::MAX,
+            f32::INFINITY,
+        ];
+        for w in v.windows(2) {
+            assert!(
+                sortable(w[0].to_bits()) < sortable(w[1].to_bits()),
+                "{} {}",
+                w[0],
+                w[1]
+            );
         }
     }
 }

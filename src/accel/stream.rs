@@ -24,7 +24,7 @@
 
 use glam::Vec3A;
 
-use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH};
+use crate::accel::bvh8::{Bvh8, EMPTY, LEAF, Node8, WIDTH, leaf_index};
 use crate::accel::node::NodeRay;
 use crate::core::math::Ray;
 
@@ -194,7 +194,7 @@ pub fn traverse<const AVX: bool>(
             }
             let c = c as usize;
             let list = offset[c] - counts[c] as usize..offset[c];
-            leaf(node.child[c] & !LEAF, &ids[list], stream);
+            leaf(leaf_index(node.child[c]), &ids[list], stream);
         }
         // Inner children, pushed farthest first so the nearest is popped
         // first.

@@ -364,6 +364,20 @@ impl Mesh {
         // The count from the small leaf array (`block.count`, which sits
         // at the block's end): known before the block arrives.
         let count = self.bvh.leaves[leaf as usize].count;
+        self.leaf_hit_of::<AVX>(wt, leaf, count, t_min, t_max)
+    }
+
+    /// [`Self::leaf_hit`] of a leaf of `count` triangles (from its
+    /// reference: see [`crate::accel::bvh8::leaf_count`]).
+    #[inline(always)]
+    fn leaf_hit_of<const AVX: bool>(
+        &self,
+        wt: &WatertightRay,
+        leaf: u32,
+        count: u32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<MeshHit> {
         let block = &self.blocks[leaf as usize];
         let (lane, t, b1, b2) = wt.intersect8::<AVX>(block, count, t_min, t_max)?;
         Some(MeshHit {
@@ -600,9 +614,14 @@ impl Mesh {
                     t_max,
                     false,
                     #[inline(always)]
-                    |leaf, t_max| {
-                        let hit =
-                            self.leaf_hit::<AVX>(&wt, leaf, t_min, Self::reach(t_max, &best))?;
+                    |leaf, count, t_max| {
+                        let hit = self.leaf_hit_of::<AVX>(
+                            &wt,
+                            leaf,
+                            count,
+                            t_min,
+                            Self::reach(t_max, &best),
+                        )?;
                         if !self.wins(hit.t, hit.triangle, &best) {
                             return None;
                         }
@@ -1149,7 +1168,10 @@ impl Mesh {
                 t_max,
                 true,
                 #[inline(always)]
-                |leaf, t_max| self.leaf_hit::<AVX>(&wt, leaf, t_min, t_max).map(|h| h.t),
+                |leaf, count, t_max| {
+                    self.leaf_hit_of::<AVX>(&wt, leaf, count, t_min, t_max)
+                        .map(|h| h.t)
+                },
                 |leaf| self.prefetch_leaf(leaf),
             ),
             Structure::Grid(g) => g.traverse(ray, t_min, t_max, true, tri),
