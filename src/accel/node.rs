@@ -7,7 +7,7 @@
 //! can differ only within rounding, far inside the margin, and the hits
 //! are the same.)
 
-use glam::Vec4;
+use glam::{Vec3A, Vec4};
 
 use crate::accel::bvh8::{Bvh8, Node8, WIDTH};
 use crate::core::math::Ray;
@@ -40,6 +40,26 @@ pub const NODE_MARGIN_EPS: f32 = 16.0;
 pub fn margin(origin_magnitude: f32, tree_magnitude: f32) -> f32 {
     NODE_MARGIN_EPS * f32::EPSILON * (origin_magnitude + tree_magnitude)
 }
+
+/// Per direction octant (bit `a` set when axis `a` points down): the
+/// rows of [`Node8::planes`] holding each axis's near and far planes
+/// (`a` and `3 + a` for an axis pointing up, swapped for one pointing
+/// down).
+const ROWS: [([u8; 3], [u8; 3]); 8] = {
+    let mut t = [([0u8; 3], [0u8; 3]); 8];
+    let mut o = 0;
+    while o < 8 {
+        let mut a = 0;
+        while a < 3 {
+            let down = (o >> a) & 1;
+            t[o].0[a] = (a + 3 * down) as u8;
+            t[o].1[a] = (a + 3 * (1 - down)) as u8;
+            a += 1;
+        }
+        o += 1;
+    }
+    t
+};
 
 /// Larger of `a` and `b`, `b` when either is NaN (one `maxps`).
 ///
@@ -140,45 +160,38 @@ impl NodeRay {
     }
 
     /// Prepares `ray` for a tree whose coordinates reach `magnitude`.
+    ///
+    /// The three axes are prepared side by side in one SSE register, and
+    /// the plane rows come from a table indexed by the direction's octant:
+    /// the same IEEE operations on the same values as axis by axis, in
+    /// about half the instructions (a bounce ray's preparation was a tenth
+    /// of its instructions, callgrind on the anchors' 100k mesh).
     #[inline(always)]
     pub fn with_magnitude(ray: &Ray, magnitude: f32) -> Self {
         let o = ray.origin;
-        let m = margin(o.abs().max_element(), magnitude);
-        let mut r = NodeRay {
-            o_near: [0.0; 3],
-            o_far: [0.0; 3],
-            inv: [0.0; 3],
-            near: [0; 3],
-            far: [0; 3],
-            octant: 0,
-            o_inv: [[0.0; 3]; 2],
-            fused: true,
-            near_off: [0; 3],
-            far_off: [0; 3],
-        };
-        let reach = magnitude + o.abs().max_element() + m;
-        for a in 0..3 {
-            let d = ray.direction[a];
-            let inv = 1.0 / d;
-            r.inv[a] = inv;
-            // The near plane of a grown box is lo - m for rays going up:
-            // (lo - m - o) inv = (lo - (o + m)) inv; hi + m going down.
-            // Chosen without branches (incoherent rays would mispredict
-            // them); `o + (-m)` is `o - m` bit for bit.
-            let down = inv.is_sign_negative();
-            let shift = m.copysign(inv);
-            r.near[a] = a as u8 + 3 * down as u8;
-            r.far[a] = a as u8 + 3 * !down as u8;
-            r.near_off[a] = 32 * r.near[a] as usize;
-            r.far_off[a] = 32 * r.far[a] as usize;
-            r.o_near[a] = o[a] + shift;
-            r.o_far[a] = o[a] - shift;
-            r.octant |= (down as u8) << a;
-            r.o_inv[0][a] = r.o_near[a] * inv;
-            r.o_inv[1][a] = r.o_far[a] * inv;
-            r.fused &= inv.abs() * reach < 1.0e30;
+        let o_mag = o.abs().max_element();
+        let m = margin(o_mag, magnitude);
+        let reach = magnitude + o_mag + m;
+        let inv = Vec3A::ONE / ray.direction;
+        // The near plane of a grown box is lo - m for rays going up:
+        // (lo - m - o) inv = (lo - (o + m)) inv; hi + m going down.
+        // `o + (-m)` is `o - m` bit for bit.
+        let shift = Vec3A::splat(m).copysign(inv);
+        let (o_near, o_far) = (o + shift, o - shift);
+        let octant = inv.is_negative_bitmask() as usize & 7;
+        let (near, far) = ROWS[octant];
+        NodeRay {
+            o_near: o_near.to_array(),
+            o_far: o_far.to_array(),
+            inv: inv.to_array(),
+            near,
+            far,
+            octant: octant as u8,
+            o_inv: [(o_near * inv).to_array(), (o_far * inv).to_array()],
+            fused: (inv.abs() * reach).cmplt(Vec3A::splat(1.0e30)).all(),
+            near_off: near.map(|r| 32 * r as usize),
+            far_off: far.map(|r| 32 * r as usize),
         }
-        r
     }
 
     /// Tests the interval `(t_min, t_max)` against the eight children of
@@ -456,6 +469,58 @@ mod tests {
             entered as f64 <= exact_hits as f64 * 1.01 + 5.0,
             "{entered} vs {exact_hits}"
         );
+    }
+
+    /// The ray's preparation, axis by axis in plain scalar code (the
+    /// definition), against `with_magnitude`'s side-by-side form: the same
+    /// bits for rays in every octant, with zero and negative-zero
+    /// direction components, far origins and huge trees.
+    #[test]
+    fn preparation_matches_the_scalar_definition() {
+        let mut s = 7u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        for r in 0..2000 {
+            let scale = [1.0, 1.0e-3, 1.0e4, 3.0e7][r % 4];
+            let o = Vec3A::new(next(), next(), next()) * scale;
+            let mut d = Vec3A::new(next(), next(), next());
+            match r % 9 {
+                0 => d.x = 0.0,
+                1 => d.y = -0.0,
+                2 => d.z = 1.0e-38,
+                _ => {}
+            }
+            let magnitude = [0.5, 100.0, 1.0e20][r % 3];
+            let got = NodeRay::with_magnitude(&Ray::new(o, d), magnitude);
+            let om = o.abs().max_element();
+            let m = margin(om, magnitude);
+            let reach = magnitude + om + m;
+            let mut octant = 0;
+            let mut fused = true;
+            for a in 0..3 {
+                let inv = 1.0 / d[a];
+                let down = inv.is_sign_negative();
+                let shift = m.copysign(inv);
+                let bits = |x: f32| x.to_bits();
+                assert_eq!(bits(got.inv[a]), bits(inv), "ray {r} axis {a}");
+                assert_eq!(bits(got.o_near[a]), bits(o[a] + shift));
+                assert_eq!(bits(got.o_far[a]), bits(o[a] - shift));
+                assert_eq!(bits(got.o_inv[0][a]), bits((o[a] + shift) * inv));
+                assert_eq!(bits(got.o_inv[1][a]), bits((o[a] - shift) * inv));
+                assert_eq!(got.near[a], a as u8 + 3 * down as u8);
+                assert_eq!(got.far[a], a as u8 + 3 * !down as u8);
+                assert_eq!(got.near_off[a], 32 * got.near[a] as usize);
+                assert_eq!(got.far_off[a], 32 * got.far[a] as usize);
+                octant |= (down as u8) << a;
+                fused &= inv.abs() * reach < 1.0e30;
+            }
+            assert_eq!(got.octant, octant, "ray {r}");
+            assert_eq!(got.fused, fused, "ray {r}");
+        }
     }
 
     /// A ray that does not move along an axis and starts exactly on a
