@@ -64,21 +64,19 @@ impl<'a> Stack<'a> {
     }
 }
 
-/// Runs `f` with a stack big enough for `bvh` (see [`Stack`]): one call
-/// whichever buffer it gets, so that the traversal loop is compiled once
-/// (a call per buffer doubled the crate's build time).
+/// Entries a traversal of `bvh` can have pending at once (see [`Stack`]).
 #[inline(always)]
-fn with_stack<R>(bvh: &Bvh8, f: impl FnOnce(Stack<'_>) -> R) -> R {
-    let need = (WIDTH - 1) * bvh.depth + 1;
-    let mut fixed = [const { MaybeUninit::<u64>::uninit() }; FIXED];
-    let mut heap = Vec::new();
-    let buf: &mut [MaybeUninit<u64>] = if need <= FIXED {
-        &mut fixed
-    } else {
-        heap.resize(need.next_power_of_two(), MaybeUninit::uninit());
-        &mut heap
-    };
-    f(Stack::new(buf))
+fn stack_need(bvh: &Bvh8) -> usize {
+    (WIDTH - 1) * bvh.depth + 1
+}
+
+/// A heap buffer for a stack of `need` entries (trees deeper than the
+/// frame's buffer covers): out of line, so that the traversal loops
+/// inlined into every query do not each carry the allocation.
+#[cold]
+#[inline(never)]
+fn heap_buffer(need: usize) -> Vec<MaybeUninit<u64>> {
+    vec![MaybeUninit::uninit(); need.next_power_of_two()]
 }
 
 /// `bits` of an `f32` as an unsigned integer that orders as the float
@@ -159,37 +157,44 @@ pub fn traverse_from_with<const AVX: bool, const FUSED: bool>(
     if bvh.nodes.is_empty() {
         return false;
     }
-    with_stack(
-        bvh,
-        #[inline(always)]
-        |stack| {
-            if FUSED && AVX && ray.fused {
-                walk::<AVX, true>(
-                    bvh,
-                    stack,
-                    start,
-                    ray,
-                    t_min,
-                    t_max,
-                    any_hit,
-                    visit,
-                    prefetch_leaf,
-                )
-            } else {
-                walk::<AVX, false>(
-                    bvh,
-                    stack,
-                    start,
-                    ray,
-                    t_min,
-                    t_max,
-                    any_hit,
-                    visit,
-                    prefetch_leaf,
-                )
-            }
-        },
-    )
+    // One buffer, chosen here, so that the loop below is compiled once
+    // per `FMA` whichever buffer it gets (one loop per buffer made the
+    // crate's release build four times longer).
+    let need = stack_need(bvh);
+    let mut fixed = [const { MaybeUninit::<u64>::uninit() }; FIXED];
+    let mut heap;
+    let buf: &mut [MaybeUninit<u64>] = if need <= FIXED {
+        &mut fixed
+    } else {
+        heap = heap_buffer(need);
+        &mut heap
+    };
+    let stack = Stack::new(buf);
+    if FUSED && AVX && ray.fused {
+        walk::<AVX, true>(
+            bvh,
+            stack,
+            start,
+            ray,
+            t_min,
+            t_max,
+            any_hit,
+            visit,
+            prefetch_leaf,
+        )
+    } else {
+        walk::<AVX, false>(
+            bvh,
+            stack,
+            start,
+            ray,
+            t_min,
+            t_max,
+            any_hit,
+            visit,
+            prefetch_leaf,
+        )
+    }
 }
 
 /// [`traverse_from_with`]'s loop; with `FMA`, every node is tested in the
@@ -534,9 +539,14 @@ mod tests {
                 depth,
                 ..Bvh8::default()
             };
-            let cap = with_stack(&bvh, |s| s.buf.len());
+            let need = stack_need(&bvh);
+            let cap = if need <= FIXED {
+                FIXED
+            } else {
+                heap_buffer(need).len()
+            };
             assert!(
-                cap >= 7 * depth + 1 && cap.is_power_of_two(),
+                cap > 7 * depth && cap.is_power_of_two(),
                 "{depth}: {cap}"
             );
         }

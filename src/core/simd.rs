@@ -188,6 +188,43 @@ macro_rules! simd_entry {
     };
 }
 
+/// Defines a method `$name::<AVX>(&self, args) -> ret`, kept out of line,
+/// that runs the `#[inline(always)]` method `$body::<AVX>` compiled for
+/// the path its caller is on: with `AVX`, inside a function with AVX2 and
+/// FMA enabled. For kernels that a large inlined query calls only on rare
+/// paths (a packet's lanes one by one, an unbounded or cut-out instance):
+/// one copy per path instead of one inlined at every call site. Each copy
+/// of the single-ray traversal inlined into the packet queries made them
+/// larger and the crate's test build longer (17 to 26 copies in each,
+/// counted in `objdump -d`).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! simd_outlined {
+    (
+        $(#[$meta:meta])*
+        $vis:vis fn $name:ident(&self $(, $arg:ident : $ty:ty)* $(,)?) -> $ret:ty
+        => $self_ty:ty, $body:ident
+    ) => {
+        $(#[$meta])*
+        #[inline(never)]
+        $vis fn $name<const AVX: bool>(&self $(, $arg: $ty)*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            if AVX {
+                #[target_feature(enable = "avx2,fma")]
+                fn fast(this: &$self_ty $(, $arg: $ty)*) -> $ret {
+                    this.$body::<true>($($arg),*)
+                }
+                // SAFETY: `AVX` is set only inside the AVX2 entry points,
+                // which run only on CPUs with AVX2 and FMA
+                // (`simd::supported`).
+                #[allow(unsafe_code)]
+                return unsafe { fast(self $(, $arg)*) };
+            }
+            self.$body::<false>($($arg),*)
+        }
+    };
+}
+
 /// [`simd_entry!`] for queries with a 16-lane kernel: `$body::<AVX,
 /// AVX512>` runs as `<true, true>` inside a function with AVX-512F, AVX2
 /// and FMA enabled ([`Isa::Avx512`]), `<true, false>` inside one with AVX2

@@ -565,6 +565,38 @@ impl Mesh {
         Some(t)
     }
 
+    crate::simd_outlined! {
+        /// [`Mesh::intersect_kernel`] out of line, for rays traced one by
+        /// one inside a larger query.
+        pub(crate) fn intersect_outlined(&self, ray: &Ray, t_min: f32, t_max: f32)
+            -> Option<MeshHit> => Mesh, intersect_kernel
+    }
+
+    crate::simd_outlined! {
+        /// [`Mesh::intersect_for_surface_kernel`] out of line.
+        pub(crate) fn intersect_for_surface_outlined(&self, ray: &Ray, t_min: f32, t_max: f32)
+            -> Option<MeshHit> => Mesh, intersect_for_surface_kernel
+    }
+
+    crate::simd_outlined! {
+        /// [`Mesh::occluded_kernel`] out of line.
+        pub(crate) fn occluded_outlined(&self, ray: &Ray, t_min: f32, t_max: f32)
+            -> bool => Mesh, occluded_kernel
+    }
+
+    /// [`Mesh::occluded_kernel`] for one lane of a packet query: a mesh of
+    /// one leaf tests it inline, any other goes out of line
+    /// ([`Mesh::occluded_outlined`]).
+    #[inline(always)]
+    pub(crate) fn occluded_lane<const AVX: bool>(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        if matches!(self.structure, Structure::Bvh) && self.single_leaf() {
+            self.leaf_hit::<AVX>(&WatertightRay::new(ray), 0, t_min, t_max)
+                .is_some()
+        } else {
+            self.occluded_outlined::<AVX>(ray, t_min, t_max)
+        }
+    }
+
     /// Closest hit with `t` in `(t_min, t_max)`.
     #[inline(always)]
     pub(crate) fn intersect_kernel<const AVX: bool>(
@@ -664,7 +696,7 @@ impl Mesh {
                 lanes,
                 #[inline(always)]
                 |l| {
-                    if let Some(h) = self.intersect_kernel::<AVX>(
+                    if let Some(h) = self.intersect_outlined::<AVX>(
                         &packet.rays[l],
                         packet.t_min[l],
                         packet.t_max[l],
@@ -740,7 +772,7 @@ impl Mesh {
                 lanes,
                 #[inline(always)]
                 |l| {
-                    if let Some(h) = self.intersect_kernel::<AVX>(
+                    if let Some(h) = self.intersect_outlined::<AVX>(
                         &packet.rays[l],
                         packet.t_min[l],
                         packet.t_max[l],
@@ -881,7 +913,8 @@ impl Mesh {
             lanes,
             #[inline(always)]
             |l| {
-                if self.occluded_kernel::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l]) {
+                if self.occluded_outlined::<AVX>(&packet.rays[l], packet.t_min[l], packet.t_max[l])
+                {
                     blocked |= 1 << l;
                 }
             },
@@ -1019,8 +1052,11 @@ impl Mesh {
         best.resize(stream.len(), None);
         if !matches!(self.structure, Structure::Bvh) {
             for (r, b) in best.iter_mut().enumerate() {
-                *b =
-                    self.intersect_kernel::<AVX>(&stream.rays[r], stream.t_min[r], stream.t_max[r]);
+                *b = self.intersect_outlined::<AVX>(
+                    &stream.rays[r],
+                    stream.t_min[r],
+                    stream.t_max[r],
+                );
             }
             return;
         }

@@ -69,6 +69,59 @@ impl RenderScene {
         self.intersect_instance_with::<AVX>(index, ray, t_min, t_max, false)
     }
 
+    crate::simd_outlined! {
+        /// [`RenderScene::intersect_instance`] out of line: for the rare
+        /// instances of the paths below (cut-outs, unbounded instances
+        /// that are not plain shapes).
+        fn intersect_instance_outlined(&self, index: u32, ray: &Ray, t_min: f32, t_max: f32)
+            -> Option<(f32, LocalHit)> => RenderScene, intersect_instance
+    }
+
+    crate::simd_outlined! {
+        /// [`RenderScene::occludes_instance`] out of line.
+        fn occludes_instance_outlined(&self, index: u32, ray: &Ray, t_min: f32, t_max: f32)
+            -> bool => RenderScene, occludes_instance
+    }
+
+    /// [`RenderScene::intersect_instance`] for the unbounded instances
+    /// (planes): a shape without cut-outs is tested inline, anything
+    /// else out of line.
+    #[inline(always)]
+    fn intersect_unbounded<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, LocalHit)> {
+        let inst = &self.instances[index as usize];
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) if !self.has_alpha(inst) => s
+                .intersect(&to_object(inst, ray), t_min, t_max)
+                .map(|h| (h.t, LocalHit::shape(&h))),
+            _ => self.intersect_instance_outlined::<AVX>(index, ray, t_min, t_max),
+        }
+    }
+
+    /// [`RenderScene::occludes_instance`] for the unbounded instances, as
+    /// [`RenderScene::intersect_unbounded`].
+    #[inline(always)]
+    fn occludes_unbounded<const AVX: bool>(
+        &self,
+        index: u32,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> bool {
+        let inst = &self.instances[index as usize];
+        match &inst.geometry {
+            InstanceGeometry::Shape(s) if !self.has_alpha(inst) => {
+                s.occludes(&to_object(inst, ray), t_min, t_max)
+            }
+            _ => self.occludes_instance_outlined::<AVX>(index, ray, t_min, t_max),
+        }
+    }
+
     /// Closest hit on one instance; meshes by their BVH, or by testing
     /// every triangle when `brute_force` is set. Hits where the instance's
     /// material is cut away ([`Material::alpha`](crate::scene::material::Material::alpha))
@@ -105,7 +158,7 @@ impl RenderScene {
                 s.intersect_t(&to_object(inst, ray), t_min, t_max)
             }
             _ => self
-                .intersect_instance::<AVX>(index, ray, t_min, t_max)
+                .intersect_instance_outlined::<AVX>(index, ray, t_min, t_max)
                 .map(|(t, _)| t),
         }
     }
@@ -203,7 +256,7 @@ impl RenderScene {
         let inst = &self.instances[index as usize];
         if self.has_alpha(inst) {
             return self
-                .intersect_instance::<AVX>(index, ray, t_min, t_max)
+                .intersect_instance_outlined::<AVX>(index, ray, t_min, t_max)
                 .is_some();
         }
         let local = to_object(inst, ray);
@@ -292,7 +345,7 @@ impl RenderScene {
         let mut best: Option<(f32, u32, LocalHit)> = None;
         let mut t_max = t_max;
         for &i in &self.tlas.unbounded {
-            if let Some((t, h)) = self.intersect_instance::<AVX>(i, ray, t_min, t_max) {
+            if let Some((t, h)) = self.intersect_unbounded::<AVX>(i, ray, t_min, t_max) {
                 t_max = t;
                 best = Some((t, i, h));
             }
@@ -330,7 +383,7 @@ impl RenderScene {
         // and calls every intrinsic of the inlined shape and mesh tests as a
         // function (`objdump -d` showed 239 such calls in each).
         for &i in &self.tlas.unbounded {
-            if self.occludes_instance::<AVX>(i, ray, t_min, t_max) {
+            if self.occludes_unbounded::<AVX>(i, ray, t_min, t_max) {
                 return true;
             }
         }
@@ -428,9 +481,9 @@ impl RenderScene {
                             #[inline(always)]
                             |l| {
                                 let ray = &p.rays[l];
-                                if let Some((t, h)) = self
-                                    .intersect_instance::<AVX>(index, ray, p.t_min[l], p.t_max[l])
-                                {
+                                if let Some((t, h)) = self.intersect_instance_outlined::<AVX>(
+                                    index, ray, p.t_min[l], p.t_max[l],
+                                ) {
                                     p.t_max[l] = t;
                                     best[l] = Some((t, index, h));
                                 }
@@ -472,7 +525,7 @@ impl RenderScene {
         if i == u32::MAX {
             return None;
         }
-        self.intersect_instance::<AVX>(i, ray, 0.0, reach)
+        self.intersect_unbounded::<AVX>(i, ray, 0.0, reach)
             .map(|(t, h)| (t, i, h))
     }
 
@@ -508,7 +561,7 @@ impl RenderScene {
                         lanes,
                         #[inline(always)]
                         |l| {
-                            hits[l] = m.intersect_for_surface_kernel::<AVX>(
+                            hits[l] = m.intersect_for_surface_outlined::<AVX>(
                                 &local_ray(index, inst, &p.rays[l]),
                                 p.t_min[l],
                                 p.t_max[l],
@@ -812,7 +865,7 @@ impl RenderScene {
         // Plain loops, as in `occluded_kernel` (no out-of-line closure).
         for (l, ray) in rays[..n].iter().enumerate() {
             for &i in &self.tlas.unbounded {
-                if self.occludes_instance::<AVX>(i, ray, 0.0, t_max[l]) {
+                if self.occludes_unbounded::<AVX>(i, ray, 0.0, t_max[l]) {
                     blocked |= 1 << l;
                     break;
                 }
@@ -827,7 +880,7 @@ impl RenderScene {
                     lanes,
                     #[inline(always)]
                     |l| {
-                        if m.occluded_kernel::<AVX>(&rays[l], 0.0, t_max[l]) {
+                        if m.occluded_lane::<AVX>(&rays[l], 0.0, t_max[l]) {
                             blocked |= 1 << l;
                         }
                     },
@@ -861,7 +914,7 @@ impl RenderScene {
                                 lanes,
                                 #[inline(always)]
                                 |l| {
-                                    if self.occludes_instance::<AVX>(
+                                    if self.occludes_instance_outlined::<AVX>(
                                         index, &p.rays[l], p.t_min[l], p.t_max[l],
                                     ) {
                                         now |= 1 << l;
@@ -893,7 +946,7 @@ impl RenderScene {
                                 #[inline(always)]
                                 |l| {
                                     let local = to_object(inst, &p.rays[l]);
-                                    if m.occluded_kernel::<AVX>(&local, p.t_min[l], p.t_max[l]) {
+                                    if m.occluded_lane::<AVX>(&local, p.t_min[l], p.t_max[l]) {
                                         now |= 1 << l;
                                     }
                                 },
