@@ -545,10 +545,7 @@ mod tests {
             } else {
                 heap_buffer(need).len()
             };
-            assert!(
-                cap > 7 * depth && cap.is_power_of_two(),
-                "{depth}: {cap}"
-            );
+            assert!(cap > 7 * depth && cap.is_power_of_two(), "{depth}: {cap}");
         }
     }
 
